@@ -1,0 +1,33 @@
+"""Exceptions with messages that name the offending input."""
+
+
+class PushToKnowError(Exception):
+    """Base class of every error the project raises on purpose."""
+
+
+class ObjectSpecError(PushToKnowError, ValueError):
+    """An object description is invalid; the message names the field and the value."""
+
+    def __init__(self, field: str, value: object, problem: str):
+        self.field, self.value, self.problem = field, value, problem
+        super().__init__(f"invalid object spec: {field}={value!r}: {problem}")
+
+
+class DatasetError(PushToKnowError):
+    """A dataset file is corrupt, of another schema version, or otherwise unreadable."""
+
+    def __init__(self, path: object, problem: str):
+        self.path, self.problem = path, problem
+        super().__init__(f"{path}: {problem}")
+
+
+class RenderingUnavailableError(PushToKnowError, RuntimeError):
+    """Headless OpenGL could not be initialised."""
+
+
+class ShapeError(PushToKnowError, ValueError):
+    """A tensor has the wrong shape; the message gives expected and received shapes."""
+
+
+class CheckpointError(PushToKnowError):
+    """A checkpoint is missing or was written by an incompatible version or config."""

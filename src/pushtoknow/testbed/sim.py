@@ -1,0 +1,251 @@
+"""The pushing simulator: one object, a kinematically driven finger pad with a tactile sensor,
+and an overhead RGB-D camera. Implements the `PushExecutor` interface.
+
+Frames: everything is in the world frame (table plane z = 0). The tactile force is the planar
+force exerted *by the pad on the object* in world axes, averaged over each sample window
+(t_k − 1/rate, t_k]; sample k is aligned with the image taken at t_k (sample 0 is all zero).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from pushtoknow.testbed import render as _render  # sets MUJOCO_GL before mujoco is imported
+from pushtoknow.testbed.config import SimConfig
+from pushtoknow.testbed.objects import ObjectSpec
+from pushtoknow.testbed.push import Push, SpeedProfile, constant_profile, release_profile
+from pushtoknow.testbed.scene import build_mjcf
+
+mujoco = _render.mujoco
+
+SETTLE_TIME = 0.2  # s of physics before a push so the supports reach equilibrium
+PAD_CLEARANCE = 0.001  # m, minimal clearance between the pad and the object at the start
+
+
+@dataclass
+class PushRecord:
+    """Everything recorded for one push. T = horizon · rate + 1 samples at times t_k = k / rate.
+
+    pose: (T, 3) object geometric-frame pose (x, y, θ), θ unwrapped (m, m, rad)
+    rgb: (T, H, W, 3) uint8; depth: (T, H, W) float32 metres; s0: (H, W) bool object mask at t_0
+    tactile: (T, 3) noisy (F_x, F_y, contact) in N, world frame, force by the pad on the object
+    force_clean: (T, 2) noiseless force; pusher: (T, 2) pad centre (m); time: (T,) s
+    trace: optional physics-rate record {"time", "pose", "velocity", "force"} for tests
+    """
+
+    push: Push
+    time: np.ndarray
+    pose: np.ndarray
+    tactile: np.ndarray
+    force_clean: np.ndarray
+    pusher: np.ndarray
+    rgb: np.ndarray | None
+    depth: np.ndarray | None
+    s0: np.ndarray | None
+    trace: dict | None = field(default=None, repr=False)
+
+
+def yaw_from_quat(q: np.ndarray) -> float:
+    w, x, y, z = q
+    return math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+
+
+class PushSimulator:
+    """Simulates pushes on one object. Deterministic given the seed passed to `execute`."""
+
+    def __init__(self, spec: ObjectSpec, config: SimConfig | None = None):
+        self.spec = spec
+        self.config = config or SimConfig()
+        self.model = mujoco.MjModel.from_xml_string(build_mjcf(spec, self.config))
+        self.data = mujoco.MjData(self.model)
+        m = self.model
+        self._pad_geom = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, "pad")
+        obj_body = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "object")
+        self._object_body = obj_body
+        self._object_geoms = {
+            g for g in range(m.ngeom)
+            if m.geom_bodyid[g] == obj_body and m.geom_type[g] == mujoco.mjtGeom.mjGEOM_MESH
+        }
+        self._obj_qpos = m.jnt_qposadr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, "object_free")]
+        self._obj_qvel = m.jnt_dofadr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, "object_free")]
+        jx = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, "pusher_x")
+        self._pad_qpos = m.jnt_qposadr[jx]
+        self._pad_qvel = m.jnt_dofadr[jx]
+        self._renderer: _render.OverheadRenderer | None = None
+        self.camera = self.config.camera.model()
+
+    # ----------------------------------------------------------------- state
+    @property
+    def renderer(self) -> _render.OverheadRenderer:
+        if self._renderer is None:
+            c = self.config.camera
+            self._renderer = _render.OverheadRenderer(self.model, c.width, c.height,
+                                                      self._object_geoms)
+        return self._renderer
+
+    def object_pose(self) -> np.ndarray:
+        """(3,) current (x, y, θ) of the object's geometric frame, θ in (-π, π]."""
+        q = self.data.qpos[self._obj_qpos:self._obj_qpos + 7]
+        return np.array([q[0], q[1], yaw_from_quat(q[3:7])])
+
+    def object_velocity(self) -> np.ndarray:
+        """(3,) world planar linear velocity of the geometric frame and yaw rate (m/s, rad/s)."""
+        v = self.data.qvel[self._obj_qvel:self._obj_qvel + 6]
+        return np.array([v[0], v[1], v[5]])
+
+    def _set_pad(self, xy: np.ndarray, vel: np.ndarray) -> None:
+        self.data.qpos[self._pad_qpos:self._pad_qpos + 2] = xy
+        self.data.qvel[self._pad_qvel:self._pad_qvel + 2] = vel
+
+    def reset(self, pose=(0.0, 0.0, 0.0)) -> np.ndarray:
+        """Place the object at rest at `pose` (x, y, θ), pad parked away; settle. Returns pose."""
+        mujoco.mj_resetData(self.model, self.data)
+        x, y, th = map(float, pose)
+        q = self.data.qpos
+        q[self._obj_qpos:self._obj_qpos + 3] = (x, y, 0.0)
+        q[self._obj_qpos + 3:self._obj_qpos + 7] = (math.cos(th / 2), 0, 0, math.sin(th / 2))
+        park = np.array([x, y]) + 0.5  # well away from the object
+        steps = int(round(SETTLE_TIME / self.model.opt.timestep))
+        for _ in range(steps):
+            self._set_pad(park, np.zeros(2))
+            mujoco.mj_step(self.model, self.data)
+        return self.object_pose()
+
+    def pad_force_on_object(self) -> np.ndarray:
+        """(2,) planar force (N, world) the pad exerts on the object at this physics step.
+
+        The pad touches nothing but the object and moves on two world-axis slide joints, so the
+        constraint force on those joints is exactly the contact force on the pad; the force on
+        the object is its opposite (no loop over contacts).
+        """
+        return -self.data.qfrc_constraint[self._pad_qvel:self._pad_qvel + 2]
+
+    # ----------------------------------------------------------------- pushes
+    def profile(self, push: Push) -> SpeedProfile:
+        pc = self.config.push
+        if push.profile == "constant":
+            return constant_profile(push.speed, pc.horizon)
+        if push.profile == "release":
+            return release_profile(push.speed, pc.release_accel, pc.release_decel, pc.horizon)
+        raise ValueError(f"unknown speed profile {push.profile!r}; use 'constant' or 'release'")
+
+    def pad_start(self, push: Push) -> np.ndarray:
+        """Pad start on the push line, `approach_gap` (+ clearance) before the true object.
+
+        The contact point may come from a coarse mask, so the start is found on the true
+        geometry: march back from cp until the pad is clear, then forward along pd to the
+        first point at the wanted gap. A push line that misses the object starts at
+        cp − pd·(radius + gap).
+        """
+        from shapely import affinity
+        from shapely.geometry import Point
+
+        pc, pad = self.config.push, self.config.pad
+        gap = pc.approach_gap if push.profile == "constant" else PAD_CLEARANCE
+        want = pad.radius + max(gap, PAD_CLEARANCE)
+        u = push.unit
+        x, y, th = self.object_pose()
+        poly = affinity.translate(
+            affinity.rotate(self.spec.footprint.polygon, th, origin=(0, 0), use_radians=True), x, y
+        )
+        cp = np.asarray(push.contact, dtype=np.float64)
+        back = cp - u * want
+        for _ in range(200):
+            if poly.distance(Point(*back)) >= want:
+                break
+            back = back - u * 0.002
+        # Forward along the line: bisection on "distance to object >= want".
+        lo, hi = 0.0, float(np.linalg.norm(cp - back)) + 0.05
+        if poly.distance(Point(*(back + u * hi))) >= want:
+            return cp - u * want  # the line misses the object (degenerate push)
+        for _ in range(30):
+            mid = 0.5 * (lo + hi)
+            if poly.distance(Point(*(back + u * mid))) >= want:
+                lo = mid
+            else:
+                hi = mid
+        return back + u * lo
+
+    def execute(self, push: Push, rng: np.random.Generator, render: bool | None = None,
+                trace: bool = False) -> PushRecord:
+        """Run one push from the current state; returns its record."""
+        cfg = self.config
+        render = cfg.render if render is None else render
+        dt = self.model.opt.timestep
+        rate = cfg.tactile.rate_hz
+        n_samples = int(round(cfg.push.horizon * rate))
+        steps_per_sample = int(round(1.0 / (rate * dt)))
+        profile = self.profile(push)
+        u = push.unit
+        start = self.pad_start(push)
+
+        T = n_samples + 1
+        pose = np.zeros((T, 3))
+        force = np.zeros((T, 2))
+        contact_share = np.zeros(T)
+        pusher = np.zeros((T, 2))
+        time = np.arange(T) / rate
+        rgb = depth = s0 = None
+        if render:
+            H, W = cfg.camera.height, cfg.camera.width
+            rgb = np.zeros((T, H, W, 3), np.uint8)
+            depth = np.zeros((T, H, W), np.float32)
+        tr = {"time": [], "pose": [], "velocity": [], "force": []} if trace else None
+
+        # Pad trajectory at every physics step, computed once (the loop only copies it in).
+        n_steps = n_samples * steps_per_sample
+        t_steps = np.arange(n_steps) * dt
+        pad_pos = start[None] + np.outer([profile.distance(t) for t in t_steps], u)
+        pad_vel = np.outer(np.interp(t_steps, profile.times, profile.speeds), u)
+
+        model, data = self.model, self.data
+        qa, va = self._pad_qpos, self._pad_qvel
+        self._set_pad(start, u * profile.speed(0.0))
+        mujoco.mj_forward(model, data)
+        theta_prev = self.object_pose()[2]
+        theta_unwrapped = theta_prev
+        step = 0
+        for k in range(T):
+            if k > 0:
+                acc = np.zeros(2)
+                touching = 0
+                for _ in range(steps_per_sample):
+                    data.qpos[qa:qa + 2] = pad_pos[step]
+                    data.qvel[va:va + 2] = pad_vel[step]
+                    mujoco.mj_step(model, data)
+                    step += 1
+                    f = -data.qfrc_constraint[va:va + 2]
+                    acc += f
+                    touching += bool(f[0] or f[1])
+                    if tr is not None:
+                        tr["time"].append(step * dt)
+                        tr["pose"].append(self.object_pose())
+                        tr["velocity"].append(self.object_velocity())
+                        tr["force"].append(f.copy())
+                force[k] = acc / steps_per_sample
+                contact_share[k] = touching / steps_per_sample
+            p = self.object_pose()
+            theta_unwrapped += math.remainder(p[2] - theta_prev, 2 * math.pi)
+            theta_prev = p[2]
+            pose[k] = (p[0], p[1], theta_unwrapped)
+            pusher[k] = data.qpos[qa:qa + 2]
+            if render:
+                if k == 0:
+                    s0 = self.renderer.segmentation(data)
+                rgb[k], depth[k] = self.renderer.rgbd(data)
+
+        noise = rng.normal(0.0, cfg.tactile.force_noise_std, size=(T, 2))
+        contact = (contact_share >= cfg.tactile.contact_threshold).astype(np.float64)
+        tactile = np.column_stack([force + noise, contact])
+        tactile[0, :2] = noise[0]
+        if tr is not None:
+            tr = {k: np.asarray(v) for k, v in tr.items()}
+        return PushRecord(push, time, pose, tactile, force, pusher, rgb, depth, s0, tr)
+
+    def close(self) -> None:
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
