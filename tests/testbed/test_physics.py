@@ -15,8 +15,19 @@ from pushtoknow.testbed.sim import PushSimulator
 HALF = 0.045  # rect1 half-width
 
 
-def run(mass=0.8, mu=0.5, com=(0.0, 0.0), inertia=None, shape="rect1", contact_y=0.0,
-        profile="constant", speed=0.02, trace=False, seed=0, render=False):
+def run(
+    mass=0.8,
+    mu=0.5,
+    com=(0.0, 0.0),
+    inertia=None,
+    shape="rect1",
+    contact_y=0.0,
+    profile="constant",
+    speed=0.02,
+    trace=False,
+    seed=0,
+    render=False,
+):
     if inertia is None:  # uniform plate of rect1 about its centre
         inertia = mass * (2 * (2 * HALF) ** 2) / 12
     spec = ObjectSpec(shape=shape, params=ObjectParams(mass, mu, com[0], com[1], inertia))
@@ -29,7 +40,7 @@ def run(mass=0.8, mu=0.5, com=(0.0, 0.0), inertia=None, shape="rect1", contact_y
 def steady_force(rec) -> float:
     """Mean ‖F‖ (noiseless) over the second half of the push, where the object slides steadily."""
     f = np.linalg.norm(rec.force_clean, axis=1)
-    return float(f[len(f) // 2:].mean())
+    return float(f[len(f) // 2 :].mean())
 
 
 @pytest.mark.parametrize(("mass", "mu"), [(0.8, 0.5), (0.2, 0.35), (1.2, 0.7)])
@@ -107,13 +118,17 @@ def test_same_seed_is_bitwise_identical_in_process():
 
 def test_same_seed_is_bitwise_identical_across_processes():
     code = (
-        "import sys, hashlib, numpy as np; sys.path.insert(0, %r);"
+        "import sys, hashlib, numpy as np; sys.path.insert(0, {!r});"
         "from test_physics import run;"
         "r = run(contact_y=0.01, seed=3);"
         "print(hashlib.sha256(r.pose.tobytes() + r.tactile.tobytes()).hexdigest())"
-    ) % str(__import__("pathlib").Path(__file__).parent)
-    out = [subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                          check=True).stdout.strip() for _ in range(2)]
+    ).format(str(__import__("pathlib").Path(__file__).parent))
+    out = [
+        subprocess.run(
+            [sys.executable, "-c", code], capture_output=True, text=True, check=True
+        ).stdout.strip()
+        for _ in range(2)
+    ]
     import hashlib
 
     r = run(contact_y=0.01, seed=3)

@@ -31,8 +31,10 @@ def warp_affine_theta(pose: torch.Tensor, pose0: torch.Tensor, camera: CameraMod
     Returns (B, 2, 3): for each output pixel, where to sample S_0 (normalised coordinates).
     """
     if pose.ndim != 2 or pose.shape[-1] != 3 or pose0.shape != pose.shape:
-        raise ShapeError(f"expected pose and pose0 of shape (B, 3), got {tuple(pose.shape)} "
-                         f"and {tuple(pose0.shape)}")
+        raise ShapeError(
+            f"expected pose and pose0 of shape (B, 3), got {tuple(pose.shape)} "
+            f"and {tuple(pose0.shape)}"
+        )
     G, g = _world_to_norm(camera, pose.dtype, pose.device)
     Ginv = torch.linalg.inv(G)
     dth = pose[:, 2] - pose0[:, 2]

@@ -50,7 +50,9 @@ class PadConfig(Config):
 
     radius: float = Field(0.005, gt=0)
     half_height: float = Field(0.0045, gt=0)
-    z: float = Field(0.0065, gt=0, description="pad centre height (m), mid-height of a 13 mm object")
+    z: float = Field(
+        0.0065, gt=0, description="pad centre height (m), mid-height of a 13 mm object"
+    )
     friction: float = Field(0.0, ge=0)
     mass: float = Field(50.0, gt=0, description="mass of the (kinematically overridden) pad body")
 

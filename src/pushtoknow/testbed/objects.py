@@ -125,9 +125,13 @@ def inertia_upper_bound(mass: float, footprint: Footprint, com) -> float:
 
 
 def validate_params(p: ObjectParams, footprint: Footprint, height: float = DEFAULT_HEIGHT) -> None:
-    """Raise ObjectSpecError naming the field and value of the first physically invalid parameter."""
-    for name, value in (("mass", p.mass), ("friction", p.friction), ("inertia", p.inertia),
-                        ("height", height)):
+    """Raise ObjectSpecError naming the field and value of the first invalid parameter."""
+    for name, value in (
+        ("mass", p.mass),
+        ("friction", p.friction),
+        ("inertia", p.inertia),
+        ("height", height),
+    ):
         if not (math.isfinite(value) and value > 0):
             raise ObjectSpecError(name, value, "must be positive")
     if p.friction > 2.0:
@@ -135,12 +139,15 @@ def validate_params(p: ObjectParams, footprint: Footprint, height: float = DEFAU
     com = (p.com_x, p.com_y)
     if not footprint.contains(com, margin=COM_MARGIN):
         raise ObjectSpecError(
-            "com", list(com), f"centre of mass must lie inside the footprint (margin {COM_MARGIN} m)"
+            "com",
+            list(com),
+            f"centre of mass must lie inside the footprint (margin {COM_MARGIN} m)",
         )
     bound = inertia_upper_bound(p.mass, footprint, com)
     if p.inertia > bound:
         raise ObjectSpecError(
-            "inertia", p.inertia,
+            "inertia",
+            p.inertia,
             f"exceeds the largest inertia {bound:.3e} kg·m² possible for mass {p.mass} kg "
             "inside this footprint",
         )
@@ -198,9 +205,7 @@ def build_catalogue(seed: int = CATALOGUE_SEED, per_shape: int = CATALOGUE_PER_S
             except ObjectSpecError:
                 rejected += 1
                 continue
-            objects.append(
-                ObjectSpec(shape=shape_name, params=p, name=f"catalogue:{len(objects)}")
-            )
+            objects.append(ObjectSpec(shape=shape_name, params=p, name=f"catalogue:{len(objects)}"))
             chosen += 1
             if chosen == per_shape:
                 break
@@ -216,14 +221,18 @@ def catalogue_object(idx: int) -> ObjectSpec:
     return cat.objects[idx]
 
 
-def sample_continuous_object(rng: np.random.Generator, shapes=None, max_tries: int = 1000) -> ObjectSpec:
+def sample_continuous_object(
+    rng: np.random.Generator, shapes=None, max_tries: int = 1000
+) -> ObjectSpec:
     """A novel object: a catalogue shape with parameters drawn uniformly within the catalogue
     ranges (rejection-sampled for physical validity)."""
     names = list(shapes or CATALOGUE_SHAPES)
     shape = names[int(rng.integers(len(names)))]
     fp = footprint_from_shape(CATALOGUE_SHAPES[shape])
     for _ in range(max_tries):
-        vals = [rng.uniform(*PARAM_RANGES[k]) for k in ("mass", "friction", "com_x", "com_y", "inertia")]
+        vals = [
+            rng.uniform(*PARAM_RANGES[k]) for k in ("mass", "friction", "com_x", "com_y", "inertia")
+        ]
         p = ObjectParams(*vals)
         try:
             validate_params(p, fp)

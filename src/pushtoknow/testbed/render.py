@@ -6,16 +6,20 @@ import os
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
-import mujoco  # noqa: E402
-import numpy as np  # noqa: E402
+import numpy as np
 
-from pushtoknow.common.errors import RenderingUnavailableError  # noqa: E402
+from pushtoknow.common.errors import RenderingUnavailableError
 
 GL_HELP = (
     "headless OpenGL is unavailable (MUJOCO_GL={gl!r}): {err}. Install Debian's "
     "'libegl1 libegl-mesa0 libgl1-mesa-dri libopengl0' and set MUJOCO_GL=egl "
     "(or install 'libosmesa6' and set MUJOCO_GL=osmesa) before starting Python."
 )
+
+try:
+    import mujoco
+except Exception as _e:  # mujoco loads the GL backend named by MUJOCO_GL at import time
+    raise RenderingUnavailableError(GL_HELP.format(gl=os.environ.get("MUJOCO_GL"), err=_e)) from _e
 
 
 class OverheadRenderer:
@@ -24,19 +28,20 @@ class OverheadRenderer:
 
     def __init__(self, model: mujoco.MjModel, width: int, height: int, object_geoms):
         self.model, self.width, self.height = model, width, height
+        self._gl = None
         try:
             self._gl = mujoco.GLContext(width, height)
             self._gl.make_current()
-        except Exception as e:  # mujoco raises several types depending on the backend
+            self._con = mujoco.MjrContext(model, mujoco.mjtFontScale.mjFONTSCALE_150)
+        except Exception as e:  # each GL backend fails with its own exception type
             raise RenderingUnavailableError(
-                GL_HELP.format(gl=os.environ.get("MUJOCO_GL"), err=e)
+                GL_HELP.format(gl=os.environ.get("MUJOCO_GL"), err=f"{type(e).__name__}: {e}")
             ) from e
         self._scene = mujoco.MjvScene(model, maxgeom=256)
         self._cam = mujoco.MjvCamera()
         self._cam.type = mujoco.mjtCamera.mjCAMERA_FIXED
         self._cam.fixedcamid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_CAMERA, "overhead")
         self._opt = mujoco.MjvOption()
-        self._con = mujoco.MjrContext(model, mujoco.mjtFontScale.mjFONTSCALE_150)
         mujoco.mjr_setBuffer(mujoco.mjtFramebuffer.mjFB_OFFSCREEN, self._con)
         self._rect = mujoco.MjrRect(0, 0, width, height)
         self._rgb = np.empty((height, width, 3), dtype=np.uint8)
@@ -48,8 +53,9 @@ class OverheadRenderer:
 
     def _draw(self, data: mujoco.MjData) -> None:
         self._gl.make_current()
-        mujoco.mjv_updateScene(self.model, data, self._opt, None, self._cam,
-                               mujoco.mjtCatBit.mjCAT_ALL, self._scene)
+        mujoco.mjv_updateScene(
+            self.model, data, self._opt, None, self._cam, mujoco.mjtCatBit.mjCAT_ALL, self._scene
+        )
         mujoco.mjr_render(self._rect, self._scene, self._con)
 
     def rgbd(self, data: mujoco.MjData) -> tuple[np.ndarray, np.ndarray]:

@@ -41,9 +41,7 @@ def build_mjcf(spec: ObjectSpec, config: SimConfig) -> str:
     h = spec.height
     meshes, prism_geoms = [], []
     for i, piece in enumerate(spec.footprint.convex_pieces()):
-        verts = " ".join(
-            f"{x:.6f} {y:.6f} {z:.6f}" for z in (PRISM_LIFT, h) for x, y in piece
-        )
+        verts = " ".join(f"{x:.6f} {y:.6f} {z:.6f}" for z in (PRISM_LIFT, h) for x, y in piece)
         meshes.append(f'<mesh name="piece{i}" vertex="{verts}"/>')
         prism_geoms.append(
             f'<geom name="obj_piece{i}" type="mesh" mesh="piece{i}" contype="{PAD_BITS}" '

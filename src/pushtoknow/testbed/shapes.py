@@ -136,27 +136,46 @@ def footprint_from_shape(shape: dict) -> Footprint:
     if kind == "ellipse":
         return ellipse_footprint(shape.get("a"), shape.get("b"))
     if kind == "rectangle":
-        w, h = _positive("shape.width", shape.get("width")), _positive("shape.height", shape.get("height"))
-        return polygon_footprint([[-w / 2, -h / 2], [w / 2, -h / 2], [w / 2, h / 2], [-w / 2, h / 2]])
+        w, h = (
+            _positive("shape.width", shape.get("width")),
+            _positive("shape.height", shape.get("height")),
+        )
+        return polygon_footprint(
+            [[-w / 2, -h / 2], [w / 2, -h / 2], [w / 2, h / 2], [-w / 2, h / 2]]
+        )
     if kind == "right_triangle":
-        a, b = _positive("shape.leg_x", shape.get("leg_x")), _positive("shape.leg_y", shape.get("leg_y"))
+        a, b = (
+            _positive("shape.leg_x", shape.get("leg_x")),
+            _positive("shape.leg_y", shape.get("leg_y")),
+        )
         return polygon_footprint([[0, 0], [a, 0], [0, b]])
     if kind == "hexagon":
         r = _positive("shape.circumradius", shape.get("circumradius"))
         t = np.arange(6) * np.pi / 3
         return polygon_footprint(np.stack([r * np.cos(t), r * np.sin(t)], 1))
     if kind == "rounded_rectangle":
-        w, h = _positive("shape.width", shape.get("width")), _positive("shape.height", shape.get("height"))
+        w, h = (
+            _positive("shape.width", shape.get("width")),
+            _positive("shape.height", shape.get("height")),
+        )
         r = _positive("shape.radius", shape.get("radius"))
         if 2 * r >= min(w, h):
-            raise ObjectSpecError("shape.radius", r, f"must be below half the smaller side {min(w, h) / 2}")
+            raise ObjectSpecError(
+                "shape.radius", r, f"must be below half the smaller side {min(w, h) / 2}"
+            )
         pts = []
-        for cx, cy, a0 in [(w / 2 - r, h / 2 - r, 0), (-w / 2 + r, h / 2 - r, 90),
-                           (-w / 2 + r, -h / 2 + r, 180), (w / 2 - r, -h / 2 + r, 270)]:
+        for cx, cy, a0 in [
+            (w / 2 - r, h / 2 - r, 0),
+            (-w / 2 + r, h / 2 - r, 90),
+            (-w / 2 + r, -h / 2 + r, 180),
+            (w / 2 - r, -h / 2 + r, 270),
+        ]:
             for a in np.radians(a0 + np.linspace(0, 90, 7)):
                 pts.append([cx + r * np.cos(a), cy + r * np.sin(a)])
         return polygon_footprint(pts)
     raise ObjectSpecError(
-        "shape.type", kind,
-        "unknown shape; use polygon, ellipse, rectangle, right_triangle, hexagon, rounded_rectangle",
+        "shape.type",
+        kind,
+        "unknown shape; use polygon, ellipse, rectangle, right_triangle, hexagon, "
+        "rounded_rectangle",
     )

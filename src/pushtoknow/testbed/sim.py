@@ -25,7 +25,7 @@ SETTLE_TIME = 0.2  # s of physics before a push so the supports reach equilibriu
 PAD_CLEARANCE = 0.001  # m, minimal clearance between the pad and the object at the start
 
 
-@dataclass
+@dataclass(eq=False)
 class PushRecord:
     """Everything recorded for one push. T = horizon · rate + 1 samples at times t_k = k / rate.
 
@@ -47,6 +47,18 @@ class PushRecord:
     s0: np.ndarray | None
     trace: dict | None = field(default=None, repr=False)
 
+    def __eq__(self, other) -> bool:
+        """Equal when the push and every recorded array are identical (bitwise)."""
+        if not isinstance(other, PushRecord) or self.push != other.push:
+            return False
+        names = ("time", "pose", "tactile", "force_clean", "pusher", "rgb", "depth", "s0")
+        return all(
+            (a is None and b is None) or (a is not None and b is not None and np.array_equal(a, b))
+            for a, b in ((getattr(self, n), getattr(other, n)) for n in names)
+        )
+
+    __hash__ = None
+
 
 def yaw_from_quat(q: np.ndarray) -> float:
     w, x, y, z = q
@@ -66,11 +78,16 @@ class PushSimulator:
         obj_body = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "object")
         self._object_body = obj_body
         self._object_geoms = {
-            g for g in range(m.ngeom)
+            g
+            for g in range(m.ngeom)
             if m.geom_bodyid[g] == obj_body and m.geom_type[g] == mujoco.mjtGeom.mjGEOM_MESH
         }
-        self._obj_qpos = m.jnt_qposadr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, "object_free")]
-        self._obj_qvel = m.jnt_dofadr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, "object_free")]
+        self._obj_qpos = m.jnt_qposadr[
+            mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, "object_free")
+        ]
+        self._obj_qvel = m.jnt_dofadr[
+            mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, "object_free")
+        ]
         jx = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, "pusher_x")
         self._pad_qpos = m.jnt_qposadr[jx]
         self._pad_qvel = m.jnt_dofadr[jx]
@@ -82,37 +99,43 @@ class PushSimulator:
     def renderer(self) -> _render.OverheadRenderer:
         if self._renderer is None:
             c = self.config.camera
-            self._renderer = _render.OverheadRenderer(self.model, c.width, c.height,
-                                                      self._object_geoms)
+            self._renderer = _render.OverheadRenderer(
+                self.model, c.width, c.height, self._object_geoms
+            )
         return self._renderer
 
     def object_pose(self) -> np.ndarray:
         """(3,) current (x, y, θ) of the object's geometric frame, θ in (-π, π]."""
-        q = self.data.qpos[self._obj_qpos:self._obj_qpos + 7]
+        q = self.data.qpos[self._obj_qpos : self._obj_qpos + 7]
         return np.array([q[0], q[1], yaw_from_quat(q[3:7])])
 
     def object_velocity(self) -> np.ndarray:
         """(3,) world planar linear velocity of the geometric frame and yaw rate (m/s, rad/s)."""
-        v = self.data.qvel[self._obj_qvel:self._obj_qvel + 6]
+        v = self.data.qvel[self._obj_qvel : self._obj_qvel + 6]
         return np.array([v[0], v[1], v[5]])
 
     def _set_pad(self, xy: np.ndarray, vel: np.ndarray) -> None:
-        self.data.qpos[self._pad_qpos:self._pad_qpos + 2] = xy
-        self.data.qvel[self._pad_qvel:self._pad_qvel + 2] = vel
+        self.data.qpos[self._pad_qpos : self._pad_qpos + 2] = xy
+        self.data.qvel[self._pad_qvel : self._pad_qvel + 2] = vel
 
     def reset(self, pose=(0.0, 0.0, 0.0)) -> np.ndarray:
         """Place the object at rest at `pose` (x, y, θ), pad parked away; settle. Returns pose."""
         mujoco.mj_resetData(self.model, self.data)
         x, y, th = map(float, pose)
         q = self.data.qpos
-        q[self._obj_qpos:self._obj_qpos + 3] = (x, y, 0.0)
-        q[self._obj_qpos + 3:self._obj_qpos + 7] = (math.cos(th / 2), 0, 0, math.sin(th / 2))
+        q[self._obj_qpos : self._obj_qpos + 3] = (x, y, 0.0)
+        q[self._obj_qpos + 3 : self._obj_qpos + 7] = (math.cos(th / 2), 0, 0, math.sin(th / 2))
         park = np.array([x, y]) + 0.5  # well away from the object
         steps = int(round(SETTLE_TIME / self.model.opt.timestep))
         for _ in range(steps):
             self._set_pad(park, np.zeros(2))
             mujoco.mj_step(self.model, self.data)
         return self.object_pose()
+
+    def observe(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Current RGB (H, W, 3) uint8, depth (H, W) float32 m, and object mask S (H, W) bool."""
+        rgb, depth = self.renderer.rgbd(self.data)
+        return rgb, depth, self.renderer.segmentation(self.data)
 
     def pad_force_on_object(self) -> np.ndarray:
         """(2,) planar force (N, world) the pad exerts on the object at this physics step.
@@ -121,7 +144,7 @@ class PushSimulator:
         constraint force on those joints is exactly the contact force on the pad; the force on
         the object is its opposite (no loop over contacts).
         """
-        return -self.data.qfrc_constraint[self._pad_qvel:self._pad_qvel + 2]
+        return -self.data.qfrc_constraint[self._pad_qvel : self._pad_qvel + 2]
 
     # ----------------------------------------------------------------- pushes
     def profile(self, push: Push) -> SpeedProfile:
@@ -169,8 +192,9 @@ class PushSimulator:
                 hi = mid
         return back + u * lo
 
-    def execute(self, push: Push, rng: np.random.Generator, render: bool | None = None,
-                trace: bool = False) -> PushRecord:
+    def execute(
+        self, push: Push, rng: np.random.Generator, render: bool | None = None, trace: bool = False
+    ) -> PushRecord:
         """Run one push from the current state; returns its record."""
         cfg = self.config
         render = cfg.render if render is None else render
@@ -213,11 +237,11 @@ class PushSimulator:
                 acc = np.zeros(2)
                 touching = 0
                 for _ in range(steps_per_sample):
-                    data.qpos[qa:qa + 2] = pad_pos[step]
-                    data.qvel[va:va + 2] = pad_vel[step]
+                    data.qpos[qa : qa + 2] = pad_pos[step]
+                    data.qvel[va : va + 2] = pad_vel[step]
                     mujoco.mj_step(model, data)
                     step += 1
-                    f = -data.qfrc_constraint[va:va + 2]
+                    f = -data.qfrc_constraint[va : va + 2]
                     acc += f
                     touching += bool(f[0] or f[1])
                     if tr is not None:
@@ -231,7 +255,7 @@ class PushSimulator:
             theta_unwrapped += math.remainder(p[2] - theta_prev, 2 * math.pi)
             theta_prev = p[2]
             pose[k] = (p[0], p[1], theta_unwrapped)
-            pusher[k] = data.qpos[qa:qa + 2]
+            pusher[k] = data.qpos[qa : qa + 2]
             if render:
                 if k == 0:
                     s0 = self.renderer.segmentation(data)

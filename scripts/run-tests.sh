@@ -1,0 +1,8 @@
+#!/usr/bin/env bash
+# Set up (if needed, with the test tools) and run the whole test suite, slow tests included.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+bash scripts/setup.sh --dev
+export MUJOCO_GL="${MUJOCO_GL:-egl}"
+.venv/bin/ruff check src tests
+exec .venv/bin/python -m pytest -n 2 --dist loadfile "$@"

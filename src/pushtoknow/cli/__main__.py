@@ -1,0 +1,3 @@
+from pushtoknow.cli.main import main
+
+main()

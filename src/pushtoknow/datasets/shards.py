@@ -1,0 +1,186 @@
+"""HDF5 shard format (schema version 1) for push episodes.
+
+One file per shard, `shard-NNNNN.h5`, written to `*.h5.tmp` and renamed when complete, so a
+finished shard is never half-written. Layout:
+
+    /                       attrs: schema_version, pushtoknow_version, fingerprint, shard_index,
+                                   sim_config (JSON), complete=True
+    /objects/<i>            attrs: spec (JSON), params (5,) SI, object_index
+    /objects/<i>/pushes/<k> attrs: action (5,) [cp_x, cp_y, pd, v, profile index], profile
+        time (T,) s · pose (T, 3) x, y, θ (unwrapped) · tactile (T, 3) F_x, F_y (N), contact
+        force_clean (T, 2) N · pusher (T, 2) m · s0 (H, W) bool
+        rgb (T, H, W, 3) uint8 · depth (T, H, W) float16 metres (±0.3 mm at 0.75 m)
+Image datasets are chunked one frame per chunk and gzip-compressed.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from pushtoknow import __version__
+from pushtoknow.common.errors import DatasetError
+from pushtoknow.testbed.objects import ObjectSpec
+from pushtoknow.testbed.push import Push
+from pushtoknow.testbed.sim import PushRecord
+
+SCHEMA_VERSION = 1
+SHARD_GLOB = "shard-*.h5"
+COMPRESSION = {"compression": "gzip", "compression_opts": 4, "shuffle": True}
+
+
+def shard_path(out: Path, index: int) -> Path:
+    return Path(out) / f"shard-{index:05d}.h5"
+
+
+@dataclass
+class ObjectEpisode:
+    spec: ObjectSpec
+    object_index: int
+    records: list[PushRecord]
+
+
+def write_shard(
+    path: Path,
+    episodes: list[ObjectEpisode],
+    *,
+    fingerprint: str,
+    shard_index: int,
+    sim_config_json: str,
+) -> None:
+    """Write a shard atomically (temp file, fsync, rename)."""
+    path = Path(path)
+    tmp = path.with_suffix(".h5.tmp")
+    with h5py.File(tmp, "w") as f:
+        f.attrs.update(
+            schema_version=SCHEMA_VERSION,
+            pushtoknow_version=__version__,
+            fingerprint=fingerprint,
+            shard_index=shard_index,
+            sim_config=sim_config_json,
+            complete=False,
+        )
+        objs = f.create_group("objects")
+        for ep in episodes:
+            g = objs.create_group(str(ep.object_index))
+            g.attrs.update(
+                spec=ep.spec.to_json(),
+                params=ep.spec.params.as_array(),
+                object_index=ep.object_index,
+            )
+            pushes = g.create_group("pushes")
+            for k, r in enumerate(ep.records):
+                p = pushes.create_group(str(k))
+                p.attrs.update(action=r.push.as_array(), profile=r.push.profile)
+                for name in ("time", "pose", "tactile", "force_clean", "pusher"):
+                    p.create_dataset(name, data=getattr(r, name))
+                p.create_dataset("s0", data=r.s0, **COMPRESSION)
+                T, H, W = r.depth.shape
+                p.create_dataset("rgb", data=r.rgb, chunks=(1, H, W, 3), **COMPRESSION)
+                p.create_dataset(
+                    "depth", data=r.depth.astype(np.float16), chunks=(1, H, W), **COMPRESSION
+                )
+        f.attrs["complete"] = True
+        f.flush()
+    with open(tmp, "rb+") as fh:
+        os.fsync(fh.fileno())
+    os.replace(tmp, path)
+
+
+def open_shard(path: Path) -> h5py.File:
+    """Open a shard for reading, checking it is complete and of our schema version."""
+    path = Path(path)
+    try:
+        f = h5py.File(path, "r")
+    except OSError as e:
+        raise DatasetError(path, f"not a readable HDF5 shard ({e})") from None
+    try:
+        version = f.attrs.get("schema_version")
+        if version is None:
+            raise DatasetError(path, "no schema_version attribute: not a pushtoknow shard")
+        if int(version) != SCHEMA_VERSION:
+            raise DatasetError(
+                path,
+                f"schema version {int(version)}, this pushtoknow reads version {SCHEMA_VERSION}",
+            )
+        if not bool(f.attrs.get("complete", False)) or "objects" not in f:
+            raise DatasetError(path, "shard is incomplete (interrupted write)")
+    except DatasetError:
+        f.close()
+        raise
+    return f
+
+
+def _read(path: Path, grp, name: str):
+    try:
+        return grp[name][()]
+    except (KeyError, OSError) as e:
+        raise DatasetError(path, f"corrupt or missing dataset {grp.name}/{name} ({e})") from None
+
+
+def read_push(path: Path, grp: h5py.Group, images: bool = True) -> PushRecord:
+    """Read one push group into a PushRecord."""
+    push = Push.from_array(grp.attrs["action"])
+    fields = {n: _read(path, grp, n) for n in ("time", "pose", "tactile", "force_clean", "pusher")}
+    rgb = depth = None
+    if images:
+        rgb = _read(path, grp, "rgb")
+        depth = _read(path, grp, "depth").astype(np.float32)
+    return PushRecord(push=push, rgb=rgb, depth=depth, s0=_read(path, grp, "s0"), **fields)
+
+
+def read_shard(path: Path, images: bool = True) -> list[ObjectEpisode]:
+    with open_shard(path) as f:
+        out = []
+        for key in sorted(f["objects"], key=int):
+            g = f["objects"][key]
+            try:
+                spec = ObjectSpec.from_dict(json.loads(g.attrs["spec"]))
+            except (KeyError, json.JSONDecodeError) as e:
+                raise DatasetError(path, f"object {key}: unreadable spec ({e})") from None
+            recs = [read_push(path, g["pushes"][k], images) for k in sorted(g["pushes"], key=int)]
+            out.append(ObjectEpisode(spec, int(g.attrs["object_index"]), recs))
+        return out
+
+
+def list_shards(root: Path) -> list[Path]:
+    root = Path(root)
+    if not root.is_dir():
+        raise DatasetError(root, "no such dataset directory")
+    return sorted(root.glob(SHARD_GLOB))
+
+
+def dataset_info(root: Path) -> dict:
+    """Summary of a dataset directory: schema_version, shards, objects, pushes, steps, bytes."""
+    shards = list_shards(root)
+    if not shards:
+        raise DatasetError(root, f"no {SHARD_GLOB} files")
+    objects = pushes = steps = 0
+    profiles: dict[str, int] = {}
+    image_shape = None
+    for s in shards:
+        with open_shard(s) as f:
+            for g in f["objects"].values():
+                objects += 1
+                for p in g["pushes"].values():
+                    pushes += 1
+                    steps += int(p["time"].shape[0])
+                    prof = str(p.attrs["profile"])
+                    profiles[prof] = profiles.get(prof, 0) + 1
+                    image_shape = list(p["rgb"].shape[1:])
+    return {
+        "schema_version": SCHEMA_VERSION,
+        "path": str(root),
+        "shards": len(shards),
+        "objects": objects,
+        "pushes": pushes,
+        "steps": steps,
+        "profiles": profiles,
+        "image_shape": image_shape,
+        "bytes": int(sum(s.stat().st_size for s in shards)),
+    }

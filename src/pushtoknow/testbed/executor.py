@@ -1,0 +1,120 @@
+"""The executor interface: anything that can show the object and push it.
+
+The filter and the push policies talk only to a `PushExecutor`, so a real robot (or a replay of
+recorded pushes) can stand in for the simulator. One call to `observe` gives the view before a
+push (for S_0 and push affordances); `execute` runs one push and returns its `PushRecord`
+(fields that a real robot cannot know, like the true pose, may be NaN).
+"""
+
+from __future__ import annotations
+
+import math
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+
+import numpy as np
+
+from pushtoknow.common.camera import CameraModel
+from pushtoknow.testbed.config import SimConfig
+from pushtoknow.testbed.objects import ObjectSpec
+from pushtoknow.testbed.push import Push
+from pushtoknow.testbed.sim import PushRecord, PushSimulator
+
+
+@dataclass(frozen=True)
+class View:
+    """What the camera shows before a push: RGB (H, W, 3) uint8, depth (H, W) m, S_0 (H, W)."""
+
+    rgb: np.ndarray
+    depth: np.ndarray
+    s0: np.ndarray
+
+
+class PushExecutor(ABC):
+    camera: CameraModel
+
+    @abstractmethod
+    def observe(self) -> View:
+        """Image the object as it rests now (before the next push)."""
+
+    @abstractmethod
+    def execute(self, push: Push) -> PushRecord:
+        """Run one push and return what was recorded."""
+
+
+class SimulatedExecutor(PushExecutor):
+    """The MuJoCo testbed behind the executor interface.
+
+    Before each push the object is placed at rest at a random pose (x, y uniform within
+    ±`workspace_half_extent`, θ uniform): like a robot that re-centres the object so every
+    push stays in view. Deterministic given `seed`.
+    """
+
+    def __init__(
+        self,
+        spec: ObjectSpec,
+        config: SimConfig | None = None,
+        seed: int = 0,
+        randomise_pose: bool = True,
+    ):
+        self.sim = PushSimulator(spec, config)
+        self.camera = self.sim.camera
+        self.rng = np.random.default_rng(seed)
+        self.randomise_pose = randomise_pose
+        self._placed = False
+
+    @property
+    def spec(self) -> ObjectSpec:
+        return self.sim.spec
+
+    def place(self) -> np.ndarray:
+        h = self.sim.config.workspace_half_extent
+        if self.randomise_pose:
+            pose = (
+                self.rng.uniform(-h, h),
+                self.rng.uniform(-h, h),
+                self.rng.uniform(-math.pi, math.pi),
+            )
+        else:
+            pose = (0.0, 0.0, 0.0)
+        self._placed = True
+        return self.sim.reset(pose)
+
+    def observe(self) -> View:
+        if not self._placed:
+            self.place()
+        return View(*self.sim.observe())
+
+    def execute(self, push: Push) -> PushRecord:
+        if not self._placed:
+            self.place()
+        rec = self.sim.execute(push, self.rng)
+        self._placed = False  # the next observe/execute places the object afresh
+        return rec
+
+    def close(self) -> None:
+        self.sim.close()
+
+
+class RecordedExecutor(PushExecutor):
+    """Replays recorded pushes in order (a dataset or a real recording). The push asked for is
+    ignored: a recording cannot be re-pushed, so only non-active policies make sense here."""
+
+    def __init__(self, records: list[PushRecord], camera: CameraModel):
+        self.records = list(records)
+        self.camera = camera
+        self._i = 0
+
+    def observe(self) -> View:
+        r = self._current()
+        return View(r.rgb[0], r.depth[0], r.s0)
+
+    def execute(self, push: Push) -> PushRecord:
+        r = self._current()
+        self._i += 1
+        return r
+
+    def _current(self) -> PushRecord:
+        if self._i >= len(self.records):
+            raise IndexError(f"the recording holds only {len(self.records)} pushes")
+        return self.records[self._i]

@@ -1,0 +1,149 @@
+"""Dataset generation: shards, resume, corruption and schema errors, torch Dataset."""
+
+import json
+
+import h5py
+import numpy as np
+import pytest
+
+from pushtoknow.common.errors import DatasetError
+from pushtoknow.datasets.generate import GenerationConfig, generate_dataset, select_objects
+from pushtoknow.datasets.shards import dataset_info, open_shard, read_shard, shard_path
+from pushtoknow.datasets.torch_dataset import PushDataset
+from pushtoknow.testbed.config import PushConfig, SimConfig
+
+# Short pushes keep the tests fast; physics is tested elsewhere.
+FAST = SimConfig(push=PushConfig(horizon=2.0))
+
+
+def cfg(**kw):
+    base = {"objects": 3, "pushes": 2, "seed": 1, "objects_per_shard": 2, "sim": FAST}
+    return GenerationConfig(**{**base, **kw})
+
+
+@pytest.fixture(scope="module")
+def dataset(tmp_path_factory):
+    out = tmp_path_factory.mktemp("ds")
+    generate_dataset(out, cfg(), workers=1, progress=False)
+    return out
+
+
+def test_info_counts(dataset):
+    info = dataset_info(dataset)
+    assert info["schema_version"] == 1
+    assert info["objects"] == 3 and info["pushes"] == 6
+    assert info["steps"] == 6 * 21  # 2 s at 10 Hz + the t = 0 sample
+    assert info["shards"] == 2
+
+
+def test_round_trip_matches_direct_simulation(dataset):
+    from pushtoknow.datasets.generate import simulate_object
+
+    eps = read_shard(shard_path(dataset, 0))
+    specs = select_objects("catalogue", 3, 1)
+    direct = simulate_object(specs[1], 1, cfg())
+    stored = eps[1]
+    assert stored.spec == specs[1]
+    for a, b in zip(stored.records, direct.records):
+        assert np.array_equal(a.pose, b.pose)
+        assert np.array_equal(a.tactile, b.tactile)
+        assert np.array_equal(a.rgb, b.rgb)
+        assert np.allclose(a.depth, b.depth, atol=1e-3)  # stored as float16
+        assert a.push == b.push
+
+
+def test_workers_do_not_change_the_data(tmp_path, dataset):
+    generate_dataset(tmp_path, cfg(), workers=2, progress=False)
+    for i in range(2):
+        a = read_shard(shard_path(tmp_path, i))
+        b = read_shard(shard_path(dataset, i))
+        for ea, eb in zip(a, b):
+            for ra, rb in zip(ea.records, eb.records):
+                assert np.array_equal(ra.pose, rb.pose) and np.array_equal(ra.rgb, rb.rgb)
+
+
+def test_resume_skips_finished_shards(tmp_path):
+    generate_dataset(tmp_path, cfg(), progress=False)
+    first = shard_path(tmp_path, 0)
+    mtime = first.stat().st_mtime_ns
+    shard_path(tmp_path, 1).unlink()  # as if interrupted before the second shard landed
+    (tmp_path / "shard-00001.h5.tmp").write_bytes(b"partial")
+    res = generate_dataset(tmp_path, cfg(), progress=False)
+    assert res == {"shards_written": 1, "shards_skipped": 1, "objects": 3}
+    assert first.stat().st_mtime_ns == mtime
+    assert not list(tmp_path.glob("*.tmp"))
+    assert dataset_info(tmp_path)["pushes"] == 6
+
+
+def test_resume_with_other_settings_is_refused(tmp_path):
+    generate_dataset(tmp_path, cfg(), progress=False)
+    with pytest.raises(DatasetError, match="other settings"):
+        generate_dataset(tmp_path, cfg(seed=2), progress=False)
+
+
+def test_corrupt_shard_error_names_file(tmp_path, dataset):
+    bad = tmp_path / "shard-00000.h5"
+    bad.write_bytes(b"\x89HDF garbage" * 10)
+    with pytest.raises(DatasetError, match="shard-00000.h5"):
+        dataset_info(tmp_path)
+
+
+def test_wrong_schema_version_error_names_file(tmp_path, dataset):
+    import shutil
+
+    p = tmp_path / "shard-00000.h5"
+    shutil.copy(shard_path(dataset, 0), p)
+    with h5py.File(p, "a") as f:
+        f.attrs["schema_version"] = 99
+    with pytest.raises(DatasetError, match=r"shard-00000.h5.*schema version 99"):
+        open_shard(p)
+
+
+def test_missing_dataset_in_shard(tmp_path, dataset):
+    import shutil
+
+    p = tmp_path / "shard-00000.h5"
+    shutil.copy(shard_path(dataset, 0), p)
+    with h5py.File(p, "a") as f:
+        del f["objects/0/pushes/0/pose"]
+    with pytest.raises(DatasetError, match="pose"):
+        read_shard(p)
+
+
+def test_torch_dataset_items(dataset):
+    ds = PushDataset(dataset)
+    assert len(ds) == 6
+    item = ds[3]
+    assert item["rgb"].shape == (21, 3, 64, 64) and item["rgb"].max() <= 1.0
+    assert item["depth"].shape == (21, 1, 64, 64)
+    assert item["pose"].shape == (21, 3) and item["tactile"].shape == (21, 3)
+    assert item["params_norm"].abs().max() <= 1.0 + 1e-6
+    import torch
+
+    loader = torch.utils.data.DataLoader(ds, batch_size=2, num_workers=0)
+    batch = next(iter(loader))
+    assert batch["s0"].shape == (2, 1, 64, 64)
+
+
+def test_objects_from_file(tmp_path):
+    f = tmp_path / "objs.yaml"
+    f.write_text(
+        json.dumps(
+            {
+                "objects": [
+                    "catalogue:3",
+                    {
+                        "shape": "hex",
+                        "mass": 0.3,
+                        "friction": 0.4,
+                        "com": [0, 0],
+                        "inertia": 0.4e-3,
+                    },
+                ]
+            }
+        )
+    )
+    specs = select_objects(str(f), 2, 0)
+    assert specs[1].shape == "hex"
+    with pytest.raises(ValueError, match="exceeds"):
+        select_objects(str(f), 3, 0)

@@ -1,0 +1,146 @@
+"""Object specs, validation errors, catalogue and continuous sampler."""
+
+import json
+
+import numpy as np
+import pytest
+
+from pushtoknow.common.errors import ObjectSpecError
+from pushtoknow.common.params import CATALOGUE_GRID, PARAM_RANGES
+from pushtoknow.testbed.objects import (
+    ObjectSpec,
+    build_catalogue,
+    inertia_upper_bound,
+    load_object_spec,
+    sample_continuous_object,
+)
+from pushtoknow.testbed.shapes import CATALOGUE_SHAPES, footprint_from_shape
+
+GOOD = {"shape": "rect1", "mass": 0.5, "friction": 0.5, "com": [0.0, 0.01], "inertia": 0.5e-3}
+
+
+def spec(**kw):
+    return ObjectSpec.from_dict({**GOOD, **kw})
+
+
+@pytest.mark.parametrize(
+    ("override", "field", "value"),
+    [
+        ({"mass": -0.1}, "mass", -0.1),
+        ({"mass": 0}, "mass", 0),
+        ({"friction": 0.0}, "friction", 0.0),
+        ({"inertia": -1e-3}, "inertia", -1e-3),
+        ({"com": [0.2, 0.0]}, "com", [0.2, 0.0]),
+        ({"shape": "banana"}, "shape", "banana"),
+        (
+            {"shape": {"type": "polygon", "vertices": [[0, 0], [0.1, 0.1], [0.1, 0], [0, 0.1]]}},
+            "shape.vertices",
+            None,
+        ),
+        ({"shape": {"type": "ellipse", "a": 0.05, "b": -1}}, "shape.b", -1),
+        ({"shape": {"type": "star"}}, "shape.type", "star"),
+        ({"mass": "heavy"}, "mass", "heavy"),
+        ({"inertia": 1.0}, "inertia", 1.0),
+    ],
+)
+def test_invalid_spec_names_field_and_value(override, field, value):
+    with pytest.raises(ObjectSpecError) as e:
+        spec(**override)
+    assert e.value.field == field
+    assert field in str(e.value)
+    if value is not None:
+        assert repr(value) in str(e.value)
+
+
+def test_self_intersecting_polygon_message():
+    bowtie = {"type": "polygon", "vertices": [[0, 0], [0.1, 0.1], [0.1, 0], [0, 0.1]]}
+    with pytest.raises(ObjectSpecError, match="not simple"):
+        spec(shape=bowtie)
+
+
+def test_missing_and_unknown_fields():
+    d = dict(GOOD)
+    del d["mass"]
+    with pytest.raises(ObjectSpecError, match="mass"):
+        ObjectSpec.from_dict(d)
+    with pytest.raises(ObjectSpecError, match="colour"):
+        ObjectSpec.from_dict({**GOOD, "colour": "red"})
+
+
+def test_non_convex_polygon_is_decomposed_into_convex_pieces():
+    L = {
+        "type": "polygon",
+        "vertices": [[0, 0], [0.1, 0], [0.1, 0.05], [0.05, 0.05], [0.05, 0.1], [0, 0.1]],
+    }
+    s = spec(shape=L, com=[0.0, 0.0], inertia=0.3e-3)
+    pieces = s.footprint.convex_pieces()
+    assert len(pieces) > 1
+    from shapely.geometry import Polygon
+
+    assert sum(Polygon(p).area for p in pieces) == pytest.approx(s.footprint.area, rel=1e-9)
+    assert all(Polygon(p).convex_hull.area == pytest.approx(Polygon(p).area) for p in pieces)
+    # Footprints are centred on their centroid.
+    c = s.footprint.polygon.centroid
+    assert abs(c.x) < 1e-12 and abs(c.y) < 1e-12
+
+
+def test_catalogue_shapes_have_spec_dimensions():
+    fp = footprint_from_shape(CATALOGUE_SHAPES["rect3"])
+    minx, miny, maxx, maxy = fp.polygon.bounds
+    assert maxx - minx == pytest.approx(0.1350) and maxy - miny == pytest.approx(0.0899)
+    tri = footprint_from_shape(CATALOGUE_SHAPES["tri1"])
+    assert tri.area == pytest.approx(0.5 * 0.1259**2)
+    ell = footprint_from_shape(CATALOGUE_SHAPES["ellip2"])
+    assert ell.area == pytest.approx(np.pi * 0.0525 * 0.0654, rel=1e-3)
+
+
+def test_catalogue_is_825_valid_seeded_objects():
+    cat = build_catalogue()
+    assert len(cat.objects) == 825
+    assert cat.rejected > 0  # some grid combinations are physically impossible
+    assert len({(o.shape, tuple(o.params.as_array())) for o in cat.objects}) == 825
+    for name in CATALOGUE_SHAPES:
+        assert sum(o.shape == name for o in cat.objects) == 75
+    for o in cat.objects:
+        for k, v in o.params.to_dict().items():
+            assert any(np.isclose(v, g) for g in CATALOGUE_GRID[k])
+    again = build_catalogue.__wrapped__()
+    assert [o.params for o in again.objects] == [o.params for o in cat.objects]
+
+
+def test_catalogue_rejections_are_physical():
+    # 0.2 kg rect1 cannot have I_z = 1.5 g·m²: all mass at the corners gives only 0.81.
+    fp = footprint_from_shape(CATALOGUE_SHAPES["rect1"])
+    assert inertia_upper_bound(0.2, fp, (0, 0)) == pytest.approx(0.2 * 2 * 0.045**2)
+
+
+def test_catalogue_address_and_files(tmp_path):
+    assert load_object_spec("catalogue:10") == build_catalogue().objects[10]
+    with pytest.raises(ObjectSpecError, match="catalogue id"):
+        load_object_spec("catalogue:9999")
+    p = tmp_path / "obj.yaml"
+    p.write_text(
+        "shape: {type: ellipse, a: 0.05, b: 0.04}\nmass: 0.4\nfriction: 0.6\n"
+        "com: [0.005, 0]\ninertia: 0.4e-3\n"
+    )
+    s = load_object_spec(p)
+    assert s.footprint.kind == "ellipse" and s.params.friction == 0.6
+    j = tmp_path / "obj.json"
+    j.write_text(json.dumps(GOOD))
+    assert load_object_spec(j).params.mass == 0.5
+    bad = tmp_path / "bad.json"
+    bad.write_text("{not json")
+    with pytest.raises(ObjectSpecError, match="bad.json"):
+        load_object_spec(bad)
+
+
+def test_continuous_sampler_is_seeded_and_in_range():
+    a = [sample_continuous_object(np.random.default_rng([5, i])) for i in range(20)]
+    b = [sample_continuous_object(np.random.default_rng([5, i])) for i in range(20)]
+    assert [x.params for x in a] == [x.params for x in b]
+    for o in a:
+        for k, v in o.params.to_dict().items():
+            lo, hi = PARAM_RANGES[k]
+            assert lo <= v <= hi
+    # Not on the grid: continuous values.
+    assert not all(np.isclose(a[0].params.mass, g) for g in CATALOGUE_GRID["mass"])
