@@ -111,6 +111,38 @@ def bench_filter(as_json: bool = typer.Option(False, "--json"), seed: int = 0):
     print(json.dumps(res, indent=None if as_json else 1))
 
 
+@app.command("import-mit")
+def import_mit(
+    src: Path = typer.Argument(
+        ..., help="folder of MIT Push .json/.h5 files (searched recursively)"
+    ),
+    out: Path = typer.Option(..., "--out"),
+    surface: Optional[str] = typer.Option(None, "--surface", help="e.g. plywood, abs, delrin"),
+    shape: Optional[str] = typer.Option(None, "--shape", help="e.g. rect1"),
+    acceleration: Optional[float] = typer.Option(
+        None, "--acceleration", help="a=… in the file name; 0 selects the paper's subset"
+    ),
+    speed: Optional[float] = typer.Option(None, "--speed", help="push speed in mm/s (v=…)"),
+    rate: float = typer.Option(10.0, "--rate", help="resampling rate (Hz)"),
+):
+    """Convert MIT Push recordings into the project's dataset format (synthetic RGB-D)."""
+    from pushtoknow.datasets.mit_import import import_mit_dataset
+
+    try:
+        res = import_mit_dataset(
+            src,
+            out,
+            surface=surface,
+            shape=shape,
+            acceleration=acceleration,
+            speed=None if speed is None else speed / 1000.0,
+            rate=rate,
+        )
+    except PushToKnowError as e:
+        _fail(e)
+    console.print(json.dumps(res))
+
+
 @app.command("push")
 def push_cmd(
     obj: str = typer.Option("catalogue:0", "--object", help="catalogue:ID or a JSON/YAML spec"),
