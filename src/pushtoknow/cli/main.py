@@ -117,12 +117,12 @@ def import_mit(
         ..., help="folder of MIT Push .json/.h5 files (searched recursively)"
     ),
     out: Path = typer.Option(..., "--out"),
-    surface: Optional[str] = typer.Option(None, "--surface", help="e.g. plywood, abs, delrin"),
-    shape: Optional[str] = typer.Option(None, "--shape", help="e.g. rect1"),
-    acceleration: Optional[float] = typer.Option(
+    surface: str | None = typer.Option(None, "--surface", help="e.g. plywood, abs, delrin"),
+    shape: str | None = typer.Option(None, "--shape", help="e.g. rect1"),
+    acceleration: float | None = typer.Option(
         None, "--acceleration", help="a=… in the file name; 0 selects the paper's subset"
     ),
-    speed: Optional[float] = typer.Option(None, "--speed", help="push speed in mm/s (v=…)"),
+    speed: float | None = typer.Option(None, "--speed", help="push speed in mm/s (v=…)"),
     rate: float = typer.Option(10.0, "--rate", help="resampling rate (Hz)"),
 ):
     """Convert MIT Push recordings into the project's dataset format (synthetic RGB-D)."""

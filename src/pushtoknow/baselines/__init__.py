@@ -1,0 +1,1 @@
+"""Baselines: Mavrakis-style features + multi-output random forest (SPEC §3.7)."""

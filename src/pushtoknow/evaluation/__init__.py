@@ -1,0 +1,1 @@
+"""Metrics and evaluation protocols (SPEC §3.7)."""

@@ -1,0 +1,43 @@
+import numpy as np
+import pytest
+
+from pushtoknow.common.params import CATALOGUE_GRID, PARAM_NAMES
+from pushtoknow.evaluation.metrics import PriorMeanPredictor, coverage, nrmse, product_nrmse
+
+
+def test_nrmse_by_hand():
+    truth = np.zeros((2, 5))
+    pred = np.zeros((2, 5))
+    pred[:, 0] = [0.1, -0.1]  # mass RMSE 0.1 over a 1.0 kg range
+    pred[0, 4] = 2e-4  # inertia RMSE sqrt(2e-8) over 1e-3
+    r = nrmse(pred, truth)
+    assert r["mass"] == pytest.approx(0.1)
+    assert r["inertia"] == pytest.approx(np.sqrt(0.5) * 2e-4 / 1e-3)
+    assert r["friction"] == 0.0
+    assert r["overall"] == pytest.approx((r["mass"] + r["inertia"]) / 5)
+    with pytest.raises(ValueError, match="shape"):
+        nrmse(pred[:, :4], truth[:, :4])
+
+
+def test_prior_mean_on_grid_is_about_0_4():
+    rng = np.random.default_rng(0)
+    grid = np.stack([rng.choice(CATALOGUE_GRID[k], 5000) for k in PARAM_NAMES], 1)
+    prior = PriorMeanPredictor().fit(grid)
+    m, _ = prior.predict(len(grid))
+    r = nrmse(m, grid)
+    for k in PARAM_NAMES:
+        assert 0.3 < r[k] < 0.45  # SPEC §3.7: ≈0.37–0.41 on the grid
+
+
+def test_coverage_of_calibrated_gaussian():
+    rng = np.random.default_rng(1)
+    truth = rng.normal(size=(20000, 5))
+    cov = coverage(np.zeros_like(truth), np.ones_like(truth), truth, 0.9)
+    assert cov["overall"] == pytest.approx(0.9, abs=0.01)
+    assert coverage(np.zeros_like(truth), 0.1 * np.ones_like(truth), truth)["mass"] < 0.2
+
+
+def test_product_nrmse_zero_when_product_right():
+    truth = np.array([[0.5, 0.6, 0, 0, 1e-3]])
+    pred = np.array([[0.6, 0.5, 0, 0, 1e-3]])  # wrong m and μ, right μ·m
+    assert product_nrmse(pred, truth) == pytest.approx(0.0, abs=1e-12)
