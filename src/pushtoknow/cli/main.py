@@ -25,7 +25,7 @@ bench_app = typer.Typer(no_args_is_help=True, help="Benchmarks (speed and memory
 app.add_typer(dataset_app, name="dataset")
 app.add_typer(bench_app, name="bench")
 console = Console()
-err_console = Console(stderr=True)
+err_console = Console(stderr=True, soft_wrap=True)
 
 
 def _fail(e: Exception) -> None:
