@@ -24,8 +24,9 @@ CATALOGUE_SHAPES: dict[str, dict] = {
     "rect2": {"type": "rectangle", "width": 0.0899, "height": 0.1126},
     "rect3": {"type": "rectangle", "width": 0.1350, "height": 0.0899},
     "tri1": {"type": "right_triangle", "leg_x": 0.1259, "leg_y": 0.1259},
-    "tri2": {"type": "right_triangle", "leg_x": 0.1259, "leg_y": 0.1510},
-    "tri3": {"type": "right_triangle", "leg_x": 0.1256, "leg_y": 0.1765},
+    # Right angle in the +x/+y corner, legs along −x and −y: the MIT Push object frame.
+    "tri2": {"type": "right_triangle", "leg_x": 0.1510, "leg_y": 0.1259},
+    "tri3": {"type": "right_triangle", "leg_x": 0.1765, "leg_y": 0.1256},
     "ellip1": {"type": "ellipse", "a": 0.0525, "b": 0.0525},
     "ellip2": {"type": "ellipse", "a": 0.0525, "b": 0.0654},
     "ellip3": {"type": "ellipse", "a": 0.0525, "b": 0.0785},
@@ -148,7 +149,8 @@ def footprint_from_shape(shape: dict) -> Footprint:
             _positive("shape.leg_x", shape.get("leg_x")),
             _positive("shape.leg_y", shape.get("leg_y")),
         )
-        return polygon_footprint([[0, 0], [a, 0], [0, b]])
+        # Right angle at the +x/+y corner, legs along −x and −y (as MIT Push's triangles).
+        return polygon_footprint([[0, 0], [-a, 0], [0, -b]])
     if kind == "hexagon":
         r = _positive("shape.circumradius", shape.get("circumradius"))
         t = np.arange(6) * np.pi / 3

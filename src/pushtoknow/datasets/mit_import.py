@@ -1,0 +1,552 @@
+"""Convert MIT Push recordings into the project's HDF5 shards, with synthetic RGB-D (SPEC §3.9).
+
+The MIT Push dataset has no images. As the paper did, every 10 Hz sample is *rendered* with the
+testbed's MuJoCo scene: the object is placed at its recorded pose and the pad at the recorded
+tip position (qpos set directly, `mj_forward`, no physics stepping), so the filter gets the same
+kind of observation as in simulation. One `PushSimulator` is built per MIT shape and reused.
+
+Conventions of the converted data (all SI):
+
+- **Shift.** MIT poses are in the robot's frame (objects near x ≈ 0.35 m, outside the
+  camera's centre). Each push is *translated* (no rotation) so that the object's initial
+  centroid is at the camera centre (0, 0): ``p_converted = p_mit + shift`` with
+  ``shift = -object_pose[0, :2]`` (m), applied to the object poses, the tip positions and the
+  contact point. θ is unchanged. Forces are unaffected (a translation). The shift of every push
+  is stored in its shard group as attribute ``mit_shift`` (2,) m.
+- **Object.** ``ObjectSpec`` with the shape ``{"type": "polygon", "vertices": mit_polygon(s)}``
+  (centroid frame), the catalogue mass and I_z (`mit_object`), CoM at (0, 0), height 0.013 m.
+  Friction is not given by the dataset: each push's `estimate_friction` is valid when the push
+  has a contact sample and the estimate lies in `FRICTION_VALID_RANGE`; the object's μ is the
+  median of its pushes' valid estimates, or `FALLBACK_FRICTION` when none is valid (the spec
+  needs μ > 0). Per-push estimates are stored as ``mit_friction`` (NaN when invalid), and the
+  object's ``friction_source`` says which rule gave μ. An object is one shape on one surface:
+  pushes are grouped by (surface, shape), since μ depends on the surface.
+- **Action.** profile "constant", speed = the file's v (m/s). Contact phase = first to last
+  sample with contact. direction = angle of the tip's displacement over the contact phase; if
+  that is shorter than `MIN_DIRECTION_DISPLACEMENT` (one contact sample), the displacement
+  over the whole push; if that is short too, from the tip towards the centroid. contact point
+  = the point of the object's boundary nearest the tip at the first contact sample, found in
+  the object frame at that sample and placed on the *initial* pose (the S_0 boundary, as
+  simulated actions are), shifted. The tip centre itself is `PUSHER_RADIUS` (4.7 mm) outside
+  it. A push with no contact sample uses sample 0.
+- **Tactile.** (F_x, F_y, contact) with the reader's force on the object in world axes, tared
+  and averaged over [t_k, t_k + 1/rate); contact ∈ {0, 1}. Real data have no noiseless force,
+  so ``force_clean`` holds the same measured force. Note the simulator averages over the
+  window *ending* at t_k and has zero force at sample 0; the reader's window *starts* at t_k.
+- **Pusher** = tip positions (shifted); the pad is rendered with the probe's radius.
+- The camera model (`CameraConfig`) is the simulator's default, 64 × 64 px, overhead at 0.75 m.
+
+Shards are written one at a time, atomically, with the per-push MIT attributes added before the
+final rename (``mit_file``, ``mit_shift``, ``mit_t0``, ``mit_force_offset``, ``mit_friction``,
+``mit_contact_span``, ``mit_meta``). An ``import.json`` records the source, filters, conventions
+and the plan; a re-run with the same settings skips finished shards.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from pushtoknow.common.errors import DatasetError
+from pushtoknow.datasets.mit_push import (
+    MIT_SHAPES,
+    MM_PER_M,
+    PUSHER_RADIUS,
+    MitPush,
+    MitPushMeta,
+    estimate_friction,
+    find_mit_push_files,
+    mit_object,
+    mit_polygon,
+    read_mit_push,
+)
+from pushtoknow.datasets.shards import ObjectEpisode, open_shard, shard_path, write_shard
+from pushtoknow.testbed.config import PadConfig, SimConfig, TactileConfig
+from pushtoknow.testbed.objects import DEFAULT_HEIGHT, ObjectSpec
+from pushtoknow.testbed.push import Push
+from pushtoknow.testbed.sim import PushRecord, PushSimulator, mujoco
+
+__all__ = [
+    "FALLBACK_FRICTION",
+    "FRICTION_VALID_RANGE",
+    "IMPORT_FILE",
+    "IMPORT_VERSION",
+    "MIN_DIRECTION_DISPLACEMENT",
+    "MitRenderer",
+    "convert_push",
+    "import_mit_dataset",
+    "mit_object_spec",
+    "mit_sim_config",
+    "push_action",
+    "push_friction",
+    "push_shift",
+    "speed_from_mm_per_s",
+]
+
+IMPORT_FILE = "import.json"
+IMPORT_VERSION = 1  # bump when the conversion changes what is written
+SOURCE_TAG = "mit-push"
+MIT_HEIGHT = DEFAULT_HEIGHT  # m, 13 mm stainless steel plates
+# μ placeholder when no push of an object gives a valid estimate: the middle of the catalogue's
+# μ grid (SPEC §3.1). Not a measurement; flagged as friction_source = "fallback".
+FALLBACK_FRICTION = 0.5
+FRICTION_VALID_RANGE = (0.01, 2.0)  # estimates outside are rejected (ObjectSpec needs μ ≤ 2)
+MIN_DIRECTION_DISPLACEMENT = 1e-3  # m of tip travel needed to define a push direction
+SHIFT_CONVENTION = (
+    "p_converted = p_mit + shift, shift = -object_pose_mit[0, :2] (m), per push: the object's "
+    "initial footprint centroid is at the camera centre (0, 0); theta unchanged; applied to "
+    "pose, pusher and the action's contact point; stored per push as attribute mit_shift"
+)
+FRICTION_CONVENTION = (
+    "object mu = median of the valid per-push estimates mean|F|/(m g) over contact samples "
+    f"(valid: a contact sample and mu in {list(FRICTION_VALID_RANGE)}), else {FALLBACK_FRICTION} "
+    "(placeholder); per-push estimates stored as attribute mit_friction (NaN when invalid)"
+)
+_PART_SUFFIX = ".part"
+
+
+# ============================================================================================
+# Small helpers
+# ============================================================================================
+def speed_from_mm_per_s(speed_mm_per_s: float) -> float:
+    """File-name / CLI speed (mm/s, e.g. ``v=20``) → m/s, the unit `import_mit_dataset` takes."""
+    return float(speed_mm_per_s) / MM_PER_M
+
+
+def mit_sim_config(rate: float = 10.0) -> SimConfig:
+    """Testbed config used to render MIT pushes: default camera, pad radius = the probe's
+    (`PUSHER_RADIUS`, m), tactile rate = `rate` (Hz) and no tactile noise (real forces)."""
+    return SimConfig(
+        pad=PadConfig(radius=PUSHER_RADIUS),
+        tactile=TactileConfig(rate_hz=rate, force_noise_std=0.0),
+    )
+
+
+def mit_object_spec(shape: str, friction: float, *, surface: str | None = None) -> ObjectSpec:
+    """`ObjectSpec` of a MIT object: polygon footprint (centroid frame, m), catalogue mass (kg)
+    and I_z (kg·m²), CoM at the centroid, height 0.013 m, the given μ (> 0)."""
+    obj = mit_object(shape)
+    name = f"mit:{surface}:{shape}" if surface else f"mit:{shape}"
+    return ObjectSpec(
+        shape={"type": "polygon", "vertices": mit_polygon(shape).tolist()},
+        params=obj.params(friction),
+        height=MIT_HEIGHT,
+        name=name,
+    )
+
+
+def push_friction(push: MitPush) -> float | None:
+    """`estimate_friction` of the push when valid (a contact sample, μ within
+    `FRICTION_VALID_RANGE`), else None."""
+    if not push.contact.any():
+        return None
+    mu = estimate_friction(push)
+    lo, hi = FRICTION_VALID_RANGE
+    return mu if (math.isfinite(mu) and lo <= mu <= hi) else None
+
+
+def push_shift(push: MitPush) -> np.ndarray:
+    """(2,) m translation that puts the push's initial object centroid at (0, 0)."""
+    return -np.asarray(push.object_pose[0, :2], dtype=np.float64)
+
+
+def _rot(th: float) -> np.ndarray:
+    c, s = math.cos(th), math.sin(th)
+    return np.array([[c, -s], [s, c]])
+
+
+def _nearest_on_boundary(poly: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """Point of the closed polygon boundary (V, 2) nearest to p (2,)."""
+    a = poly
+    b = np.roll(poly, -1, axis=0)
+    ab = b - a
+    t = np.clip(np.einsum("ij,ij->i", p - a, ab) / np.einsum("ij,ij->i", ab, ab), 0.0, 1.0)
+    q = a + t[:, None] * ab
+    return q[int(np.argmin(np.linalg.norm(q - p, axis=1)))]
+
+
+def _contact_span(push: MitPush) -> tuple[int, int]:
+    """(first, last) contact sample indices, (-1, -1) when the push never touches."""
+    idx = np.flatnonzero(push.contact)
+    return (int(idx[0]), int(idx[-1])) if idx.size else (-1, -1)
+
+
+def push_action(push: MitPush, shift: np.ndarray | None = None) -> Push:
+    """The push a = (cp, pd, v) of a recording (see the module doc for the rules).
+
+    cp: world (m), after adding `shift` (default `push_shift`); pd: rad; v: the file's speed
+    (m/s); profile "constant".
+    """
+    shift = push_shift(push) if shift is None else np.asarray(shift, dtype=np.float64)
+    tip, pose = push.tip_pose, push.object_pose
+    first, last = _contact_span(push)
+    k = max(first, 0)
+    d = tip[last] - tip[first] if first >= 0 else np.zeros(2)
+    if np.linalg.norm(d) < MIN_DIRECTION_DISPLACEMENT:
+        d = tip[-1] - tip[0]
+    if np.linalg.norm(d) < MIN_DIRECTION_DISPLACEMENT:
+        d = pose[k, :2] - tip[k]
+    direction = math.atan2(d[1], d[0])
+    poly = mit_polygon(push.meta.shape)
+    tip_obj = _rot(pose[k, 2]).T @ (tip[k] - pose[k, :2])  # tip in the object frame at sample k
+    cp_obj = _nearest_on_boundary(poly, tip_obj)
+    cp = pose[0, :2] + _rot(pose[0, 2]) @ cp_obj + shift
+    return Push((float(cp[0]), float(cp[1])), float(direction), "constant", float(push.meta.speed))
+
+
+# ============================================================================================
+# Rendering
+# ============================================================================================
+class MitRenderer:
+    """Renders recorded poses of one MIT shape with the testbed's scene (no physics stepping).
+
+    The object's free joint and the pad's two slide joints are set from the recording, then
+    `mj_forward` updates the kinematics before each render.
+    """
+
+    def __init__(self, spec: ObjectSpec, config: SimConfig | None = None):
+        self.sim = PushSimulator(spec, config)
+        m = self.sim.model
+        free = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, "object_free")
+        px = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, "pusher_x")
+        self._obj_qpos = int(m.jnt_qposadr[free])
+        self._pad_qpos = int(m.jnt_qposadr[px])
+        self.camera = self.sim.camera
+
+    def place(self, pose, pad_xy) -> None:
+        """Object at pose (x, y, θ) (m, m, rad) resting on the table, pad centre at pad_xy (m)."""
+        data = self.sim.data
+        x, y, th = map(float, pose)
+        data.qpos[:] = self.sim.model.qpos0
+        data.qvel[:] = 0.0
+        q = self._obj_qpos
+        data.qpos[q : q + 7] = (x, y, 0.0, math.cos(th / 2), 0.0, 0.0, math.sin(th / 2))
+        data.qpos[self._pad_qpos : self._pad_qpos + 2] = np.asarray(pad_xy, dtype=np.float64)
+        mujoco.mj_forward(self.sim.model, data)
+
+    def render(
+        self, poses: np.ndarray, pad: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """poses (T, 3), pad (T, 2) → rgb (T, H, W, 3) uint8, depth (T, H, W) float32 m,
+        S_0 (H, W) bool (object mask of frame 0)."""
+        c = self.sim.config.camera
+        T = len(poses)
+        rgb = np.zeros((T, c.height, c.width, 3), np.uint8)
+        depth = np.zeros((T, c.height, c.width), np.float32)
+        r = self.sim.renderer
+        s0 = None
+        for k in range(T):
+            self.place(poses[k], pad[k])
+            if k == 0:
+                s0 = r.segmentation(self.sim.data)
+            rgb[k], depth[k] = r.rgbd(self.sim.data)
+        return rgb, depth, s0
+
+    def close(self) -> None:
+        self.sim.close()
+
+
+def convert_push(push: MitPush, renderer: MitRenderer) -> tuple[PushRecord, dict]:
+    """One MIT push → (`PushRecord` in the shifted frame with rendered RGB-D, MIT attributes).
+
+    The attributes (stored on the push's shard group): mit_file (str), mit_shift (2,) m,
+    mit_t0 Unix s, mit_force_offset (2,) N, mit_friction (NaN if invalid),
+    mit_contact_span (first, last) sample indices, mit_meta (JSON of the file-name fields).
+    """
+    shift = push_shift(push)
+    pose = push.object_pose.copy()
+    pose[:, :2] += shift
+    pusher = push.tip_pose + shift
+    rgb, depth, s0 = renderer.render(pose, pusher)
+    force = np.asarray(push.force, dtype=np.float64)
+    record = PushRecord(
+        push=push_action(push, shift),
+        time=np.asarray(push.times, dtype=np.float64),
+        pose=pose,
+        tactile=np.column_stack([force, push.contact.astype(np.float64)]),
+        force_clean=force.copy(),
+        pusher=pusher,
+        rgb=rgb,
+        depth=depth,
+        s0=s0,
+    )
+    mu = push_friction(push)
+    attrs = {
+        "mit_shift": shift,
+        "mit_t0": push.t0,
+        "mit_force_offset": np.asarray(push.force_offset, dtype=np.float64),
+        "mit_friction": np.nan if mu is None else mu,
+        "mit_contact_span": np.array(_contact_span(push), dtype=np.int64),
+        "mit_meta": json.dumps(_meta_dict(push.meta)),
+    }
+    return record, attrs
+
+
+def _meta_dict(meta: MitPushMeta) -> dict:
+    return {
+        "surface": meta.surface,
+        "shape": meta.shape,
+        "acceleration": meta.acceleration,
+        "speed_m_per_s": meta.speed,
+        "side": meta.side,
+        "position": meta.position,
+        "angle_rad": meta.angle,
+    }
+
+
+# ============================================================================================
+# Import
+# ============================================================================================
+def _filters(surface, shape, acceleration, speed) -> dict:
+    return {
+        "surface": surface,
+        "shape": shape,
+        "acceleration": acceleration,
+        "speed_m_per_s": speed,
+        "speed_mm_per_s": None if speed is None else speed * MM_PER_M,
+    }
+
+
+def _plan(files: list[tuple[Path, MitPushMeta]], objects_per_shard: int) -> list[list[dict]]:
+    """Objects (one per (surface, shape), sorted by surface then catalogue order) in shards."""
+    groups: dict[tuple[str, str], list[Path]] = {}
+    for p, meta in files:
+        groups.setdefault((meta.surface, meta.shape), []).append(p)
+    keys = sorted(groups, key=lambda k: (k[0], MIT_SHAPES.index(k[1])))
+    objects = [
+        {"object_index": i, "surface": s, "shape": o, "files": groups[(s, o)]}
+        for i, (s, o) in enumerate(keys)
+    ]
+    k = objects_per_shard
+    return [objects[i : i + k] for i in range(0, len(objects), k)]
+
+
+def _fingerprint(src: Path, plan: list[list[dict]], settings: dict) -> str:
+    names = [[[str(p.relative_to(src)) for p in o["files"]] for o in sh] for sh in plan]
+    blob = json.dumps({"version": IMPORT_VERSION, "files": names, **settings}, sort_keys=True)
+    return hashlib.sha256(blob.encode()).hexdigest()[:16]
+
+
+def _finished(path: Path, fingerprint: str) -> bool:
+    if not path.exists():
+        return False
+    with open_shard(path) as f:  # raises DatasetError naming a corrupt shard
+        if f.attrs.get("fingerprint") != fingerprint:
+            raise DatasetError(
+                path,
+                "written by a different import or generation (source files, filters or "
+                "settings differ); use another --out directory",
+            )
+    return True
+
+
+def _write_shard_with_attrs(
+    path: Path,
+    episodes: list[ObjectEpisode],
+    object_attrs: list[dict],
+    push_attrs: list[list[dict]],
+    *,
+    fingerprint: str,
+    shard_index: int,
+    sim_config_json: str,
+) -> None:
+    """`write_shard` to ``<path>.part``, add the MIT attributes, fsync, rename to `path`."""
+    part = path.with_name(path.name + _PART_SUFFIX)
+    write_shard(
+        part,
+        episodes,
+        fingerprint=fingerprint,
+        shard_index=shard_index,
+        sim_config_json=sim_config_json,
+    )
+    with h5py.File(part, "r+") as f:
+        f.attrs.update(source=SOURCE_TAG, shift_convention=SHIFT_CONVENTION)
+        for ep, oa, pas in zip(episodes, object_attrs, push_attrs):
+            g = f["objects"][str(ep.object_index)]
+            g.attrs.update(oa)
+            for k, pa in enumerate(pas):
+                g["pushes"][str(k)].attrs.update(pa)
+        f.flush()
+    with open(part, "rb+") as fh:
+        os.fsync(fh.fileno())
+    os.replace(part, path)
+
+
+def import_mit_dataset(
+    src: Path,
+    out: Path,
+    *,
+    surface: str | None = None,
+    shape: str | None = None,
+    acceleration: float | None = None,
+    speed: float | None = None,
+    rate: float = 10.0,
+    objects_per_shard: int = 4,
+    progress: bool = True,
+) -> dict:
+    """Convert (or resume converting) MIT Push files under `src` into shards in `out`.
+
+    Filters as in `find_mit_push_files`: surface (e.g. "plywood"), shape (e.g. "rect1"),
+    acceleration (the name's ``a``; 0 = constant speed) and **speed in m/s** (the file names and
+    the CLI's ``--speed`` are in mm/s: pass ``speed_from_mm_per_s(v)``, i.e. v / 1000). The
+    paper's subset is ``acceleration=0`` and one speed. rate: resampling rate (Hz).
+    One object = one (surface, shape) with all its selected pushes; `objects_per_shard`
+    objects per shard. Peak memory ≈ one shard's rendered frames (≈ 28.7 kB per 64 × 64 frame).
+    Resuming: finished shards whose fingerprint (relative file names, filters, rate, layout,
+    render config) matches are skipped; the source's absolute path is recorded, not compared.
+
+    Returns {"files": matching files, "pushes": pushes converted by this call,
+    "objects": objects in the selection, "shards_written", "shards_skipped"}.
+    Raises `DatasetError` when no file matches (naming `src` and the filters), when `out` holds
+    a dataset made with other settings, or naming a corrupt source file.
+    """
+    src, out = Path(src), Path(out)
+    if objects_per_shard < 1:
+        raise ValueError(f"objects_per_shard must be >= 1, got {objects_per_shard}")
+    if not (math.isfinite(rate) and rate > 0):
+        raise ValueError(f"rate must be a positive number of Hz, got {rate!r}")
+    filters = _filters(surface, shape, acceleration, speed)
+    files = find_mit_push_files(src, surface, shape, acceleration, speed)
+    if not files:
+        shown = ", ".join(f"{k}={v}" for k, v in filters.items() if v is not None) or "none"
+        raise DatasetError(src, f"no MIT Push files match the filters ({shown})")
+    plan = _plan(files, objects_per_shard)
+    cfg = mit_sim_config(rate)
+    sim_json = cfg.model_dump_json()
+    settings = {
+        "filters": filters,
+        "rate_hz": rate,
+        "objects_per_shard": objects_per_shard,
+        "sim": json.loads(sim_json),
+        "fallback_friction": FALLBACK_FRICTION,
+    }
+    fingerprint = _fingerprint(src, plan, settings)
+
+    out.mkdir(parents=True, exist_ok=True)
+    info_file = out / IMPORT_FILE
+    if info_file.exists():
+        old = json.loads(info_file.read_text())
+        if old.get("fingerprint") != fingerprint:
+            raise DatasetError(
+                out,
+                f"holds a dataset imported with other files or settings (see {IMPORT_FILE}); "
+                "use another --out directory",
+            )
+    else:
+        info = {
+            "fingerprint": fingerprint,
+            "format": "pushtoknow MIT Push import",
+            "import_version": IMPORT_VERSION,
+            "source": {"directory": str(src.resolve()), "files": len(files)},
+            **settings,
+            "shift_convention": SHIFT_CONVENTION,
+            "friction_convention": FRICTION_CONVENTION,
+            "force_clean": "the measured force (real data have no noiseless force)",
+            "object": f"MIT catalogue mass and I_z, CoM at the centroid, height {MIT_HEIGHT} m",
+            "shards": [
+                {
+                    "shard": shard_path(out, i).name,
+                    "objects": [
+                        {
+                            "object_index": o["object_index"],
+                            "surface": o["surface"],
+                            "shape": o["shape"],
+                            "pushes": len(o["files"]),
+                            "files": [str(p.relative_to(src)) for p in o["files"]],
+                        }
+                        for o in objs
+                    ],
+                }
+                for i, objs in enumerate(plan)
+            ],
+        }
+        tmp = info_file.with_suffix(".json.tmp")
+        tmp.write_text(json.dumps(info, indent=1))
+        os.replace(tmp, info_file)
+    for stale in [*out.glob("*.h5.tmp"), *out.glob(f"*.h5{_PART_SUFFIX}")]:
+        stale.unlink()
+
+    todo = [i for i in range(len(plan)) if not _finished(shard_path(out, i), fingerprint)]
+    skipped = len(plan) - len(todo)
+    total = sum(len(o["files"]) for i in todo for o in plan[i])
+
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
+
+    renderers: dict[str, MitRenderer] = {}
+    converted = 0
+    try:
+        with Progress(
+            "[progress.description]{task.description}",
+            BarColumn(),
+            MofNCompleteColumn(),
+            TimeRemainingColumn(),
+            disable=not progress,
+        ) as bar:
+            task = bar.add_task(f"importing MIT Push ({skipped} shards already done)", total=total)
+            for i in todo:
+                episodes, object_attrs, push_attrs = [], [], []
+                for o in plan[i]:
+                    ep, oa, pa = _convert_object(o, src, rate, cfg, renderers, bar, task)
+                    episodes.append(ep)
+                    object_attrs.append(oa)
+                    push_attrs.append(pa)
+                    converted += len(ep.records)
+                _write_shard_with_attrs(
+                    shard_path(out, i),
+                    episodes,
+                    object_attrs,
+                    push_attrs,
+                    fingerprint=fingerprint,
+                    shard_index=i,
+                    sim_config_json=sim_json,
+                )
+    finally:
+        for r in renderers.values():
+            r.close()
+    return {
+        "files": len(files),
+        "pushes": converted,
+        "objects": sum(len(objs) for objs in plan),
+        "shards_written": len(todo),
+        "shards_skipped": skipped,
+    }
+
+
+def _convert_object(
+    o: dict,
+    src: Path,
+    rate: float,
+    cfg: SimConfig,
+    renderers: dict[str, MitRenderer],
+    bar,
+    task,
+) -> tuple[ObjectEpisode, dict, list[dict]]:
+    """All pushes of one (surface, shape) object → episode, object attrs, per-push attrs."""
+    pushes = [read_mit_push(p, rate) for p in o["files"]]
+    estimates = [push_friction(p) for p in pushes]
+    valid = [m for m in estimates if m is not None]
+    mu = float(np.median(valid)) if valid else FALLBACK_FRICTION
+    spec = mit_object_spec(o["shape"], mu, surface=o["surface"])
+    if o["shape"] not in renderers:  # μ does not change the rendering: reuse across surfaces
+        renderers[o["shape"]] = MitRenderer(spec, cfg)
+    renderer = renderers[o["shape"]]
+    records, attrs = [], []
+    for path, push in zip(o["files"], pushes):
+        rec, pa = convert_push(push, renderer)
+        pa["mit_file"] = str(path.relative_to(src))
+        records.append(rec)
+        attrs.append(pa)
+        bar.advance(task, 1)
+    source = f"median of {len(valid)} valid per-push estimates" if valid else "fallback"
+    object_attrs = {
+        "mit_surface": o["surface"],
+        "mit_shape": o["shape"],
+        "friction_source": source,
+    }
+    return ObjectEpisode(spec, o["object_index"], records), object_attrs, attrs
