@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 from pathlib import Path
@@ -16,6 +17,8 @@ from pushtoknow.common.params import GRAVITY
 from pushtoknow.datasets.mit_import import (
     FALLBACK_FRICTION,
     IMPORT_FILE,
+    IMPORT_VERSION,
+    TACTILE_CONVENTION,
     import_mit_dataset,
     mit_sim_config,
     push_action,
@@ -58,7 +61,9 @@ def _streams(touch: bool = True) -> dict[str, np.ndarray]:
     V along u_obj (u turned by DRIFT) and turns at OMEGA until T_STOP. The probe reads
     -FORCE·u while touching (0 if not `touch`, and then the object stays put). Streams at
     250/200/500 Hz, common span [0, T_END], Unix times; force samples sit between 10 Hz
-    window edges (50 per window)."""
+    window edges (50 per window) and start 0.1 s early (window 0, [-0.1, 0) s, has them).
+    Contact [T_CONTACT, T_STOP) = [0.75, 2.5) s: windows [t_k - 0.1, t_k) of samples 8
+    (half) to 25."""
     u = np.array([math.cos(THETA0), math.sin(THETA0)])
     n = np.array([-u[1], u[0]])
     u_obj = np.array([math.cos(THETA0 + DRIFT), math.sin(THETA0 + DRIFT)])
@@ -219,10 +224,12 @@ def test_sample_actions(sample_import, sample_dir):
     poly = mit_polygon("rect1")
     for name, rec in zip(_files_of(out), ep.records):
         mit = read_mit_push(sample_dir / name)
-        k = int(np.argmax(mit.contact))
+        first = int(np.argmax(mit.contact))
+        assert first >= 1  # no sample file is in contact in window 0
+        k = first - 1  # onset: the last sample before contact, the window start of first contact
         tip = rec.pusher[k]
         cp = np.asarray(rec.push.contact)
-        # cp lies on the initial boundary, about one probe radius from the tip at first contact.
+        # cp lies on the initial boundary, about one probe radius from the tip at the onset.
         c, s = math.cos(rec.pose[0, 2]), math.sin(rec.pose[0, 2])
         cp_obj = np.array([[c, s], [-s, c]]) @ (cp - rec.pose[0, :2])
         assert np.max(np.abs(cp_obj)) == pytest.approx(0.045, abs=1e-9)  # on rect1's square
@@ -255,11 +262,15 @@ def test_synthetic_conversion_exact(synth_import, synth_dir):
     assert rec.push.direction == pytest.approx(THETA0, abs=1e-9)
     np.testing.assert_allclose(rec.push.contact, -RECT3_HALF_X * u, atol=1e-9)
     assert rec.push.speed == 0.05
-    # Tactile: force on the object along u while touching (windows 7..24).
+    # Tactile: force on the object along u while touching, in the windows [t_k - 0.1, t_k)
+    # ending at samples 8 (half: contact from 0.75 s) to 25 ([2.4, 2.5)), as the simulator.
     contact = rec.tactile[:, 2]
-    np.testing.assert_array_equal(np.flatnonzero(contact), np.arange(7, 25))
+    np.testing.assert_array_equal(np.flatnonzero(contact), np.arange(8, 26))
     np.testing.assert_allclose(rec.tactile[10, :2], FORCE * u, atol=1e-9)
-    np.testing.assert_allclose(rec.tactile[7, :2], 0.5 * FORCE * u, atol=1e-9)  # half window
+    np.testing.assert_allclose(rec.tactile[25, :2], FORCE * u, atol=1e-9)
+    np.testing.assert_allclose(rec.tactile[8, :2], 0.5 * FORCE * u, atol=1e-9)  # half window
+    for k in (0, 7, 26, 29):  # window 0 lies before t_start: raw samples there, at rest
+        np.testing.assert_array_equal(rec.tactile[k, :2], 0.0)
     mean_f = (0.5 * FORCE + 17 * FORCE) / 18
     assert ep.spec.params.friction == pytest.approx(mean_f / (mit_object("rect3").mass * GRAVITY))
 
@@ -297,8 +308,11 @@ def test_import_json_and_attrs(synth_import, synth_dir):
         assert pa["mit_file"] == _name()
         np.testing.assert_allclose(pa["mit_shift"], -C0, atol=1e-12)
         assert pa["mit_t0"] == T0
-        assert list(pa["mit_contact_span"]) == [7, 24]
+        assert list(pa["mit_contact_span"]) == [8, 25]
+        assert "[t_k - 1/rate, t_k)" in f.attrs["tactile_convention"]
         assert json.loads(pa["mit_meta"])["speed_m_per_s"] == 0.05
+    assert info["import_version"] == IMPORT_VERSION == 2
+    assert info["tactile_convention"] == TACTILE_CONVENTION
 
 
 def test_filters_select_subset(synth_dir, tmp_path):
@@ -340,6 +354,40 @@ def test_no_contact_action_falls_back(synth_dir):
     from shapely.geometry import Point, Polygon
 
     assert Polygon(poly).exterior.distance(Point(*cp_obj)) < 1e-9
+
+
+def test_action_uses_the_sample_before_first_contact(synth_dir):
+    """cp/direction use the onset sample (first contact - 1), clamped to 0 when contact is
+    already felt in window 0 (it lies before t_start)."""
+    push = read_mit_push(synth_dir / _name())
+    assert int(np.argmax(push.contact)) == 8
+    a = push_action(push)
+    u = np.array([math.cos(THETA0), math.sin(THETA0)])
+    shift = -C0
+    np.testing.assert_allclose(a.contact, -RECT3_HALF_X * u, atol=1e-9)  # tip at t_7: at rest
+    assert a.direction == pytest.approx(THETA0, abs=1e-9)
+    # The first contact sample itself (t_8) would not do: the object has moved and turned.
+    moved = push.object_pose[8] - push.object_pose[0]
+    assert np.linalg.norm(moved[:2]) > 1e-3 and abs(moved[2]) > 5e-3
+    # Contact from window 0: onset = sample 0, direction over the whole contact phase
+    # (here the whole push, side-step included).
+    early = dataclasses.replace(push, contact=np.ones(len(push), dtype=bool))
+    b = push_action(early, shift)
+    d = push.tip_pose[-1] - push.tip_pose[0]
+    assert b.direction == pytest.approx(math.atan2(d[1], d[0]), abs=1e-12)
+    th0 = push.object_pose[0, 2]
+    c, s = math.cos(th0), math.sin(th0)
+    tip_obj = np.array([[c, s], [-s, c]]) @ (push.tip_pose[0] - push.object_pose[0, :2])
+    cp_obj = np.array([[c, s], [-s, c]]) @ (np.asarray(b.contact) - shift - C0)
+    assert cp_obj[0] == pytest.approx(-RECT3_HALF_X, abs=1e-9)  # on the pushed face
+    assert cp_obj[1] == pytest.approx(tip_obj[1], abs=1e-9)  # straight across from the tip
+    # A single contact sample: direction from the tip's travel over that one window.
+    one = np.zeros(len(push), dtype=bool)
+    one[12] = True
+    d1 = push.tip_pose[12] - push.tip_pose[11]
+    g = push_action(dataclasses.replace(push, contact=one), shift)
+    assert np.linalg.norm(d1) == pytest.approx(V / 10, rel=1e-5)  # Unix-time rounding
+    assert g.direction == pytest.approx(math.atan2(d1[1], d1[0]), abs=1e-12)
 
 
 def test_resume_skips_finished_shards(synth_dir, tmp_path):

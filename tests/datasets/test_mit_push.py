@@ -92,7 +92,8 @@ def _tare_streams(offset=(-1.5, -0.5), force=(0.3 * RECT1_MASS * GRAVITY, 0.0)):
     """Pusher at rest 0–0.5 s, pushing +x at 0.05 m/s 0.5–1.5 s, at rest 1.5–2 s.
 
     The probe reads offset − force while pushing and offset at rest; ft samples sit halfway
-    between the 10 Hz window edges so each window holds exactly 50 of them.
+    between the 10 Hz window edges so each window holds exactly 50 of them. The ft stream
+    starts 0.1 s before the others, so window 0, [-0.1, 0) s, holds raw samples too.
     """
     t = _times(0.0, 2.0, 250)
     x = 0.30 + 0.05 * np.clip(t - 0.5, 0.0, 1.0)
@@ -166,6 +167,8 @@ def test_interpolation_exact_on_linear_motion(tmp_path, mit_ext):
     np.testing.assert_allclose(push.object_pose, exact["obj"](tau), atol=1e-6, rtol=0)
     np.testing.assert_allclose(push.tip_pose, exact["tip"](tau), atol=1e-6, rtol=0)
     np.testing.assert_allclose(push.force, np.tile([1.0, 0.5], (len(push), 1)), atol=1e-12)
+    # ft starts last (t_start): window 0 lies before it, no raw sample → the first reading
+    assert push.force_samples[0] == 0 and np.all(push.force_samples[1:] > 0)
     assert push.contact.all()
     assert push.tip_pose.shape == (len(push), 2) and push.object_pose.shape == (len(push), 3)
 
@@ -207,7 +210,10 @@ def test_resampled_length_rule(tmp_path, span, rate, expected):
 
 
 def test_force_is_window_average_not_point_sample(tmp_path):
-    """F = 2 + cos(2π·rate·t): window mean 2; a point sample at t_k would give 3, centre 1."""
+    """F = 2 + cos(2π·rate·t): window mean 2; a point sample at t_k would give 3, centre 1.
+
+    The ft stream starts 0.1 s before t_start, so window 0 averages 100 raw samples too.
+    """
     rate = 10.0
     t = _times(0.1, 2.2, 250)
     tip = np.stack([T0 + t, 0.3 + 0.01 * t, 0 * t, 0 * t], 1)
@@ -228,7 +234,7 @@ def test_empty_force_window_falls_back_to_interpolation(tmp_path):
     tip = np.stack([T0 + t, 0.3 + 0 * t, 0 * t, 0 * t], 1)
     obj = np.stack([T0 + t, 0.35 + 0 * t, 0 * t, 0 * t], 1)
     tf = -0.1 + (np.arange(2200) + 0.5) / 1000  # starts before the others: t_start = 0
-    keep = ~((tf >= 0.3) & (tf < 0.4))  # window 3 gets no sample
+    keep = ~((tf >= 0.3) & (tf < 0.4))  # window 4, [0.3, 0.4) s, ending at t_4, gets no sample
     tf = tf[keep]
     fx = 1.0 + 2.0 * tf  # linear ramp: window means and interpolation are both exact
     ft = np.stack([T0 + tf, -fx, 0 * tf, 0 * tf], 1)
@@ -236,9 +242,115 @@ def test_empty_force_window_falls_back_to_interpolation(tmp_path):
         _write(tmp_path / _name(), {"tip_pose": tip, "object_pose": obj, "ft_wrench": ft}),
         tare=False,
     )
-    assert push.force_samples[3] == 0 and np.all(np.delete(push.force_samples, 3) == 100)
-    centres = (np.arange(len(push)) + 0.5) / rate
+    # window 0 is [-0.1, 0) s, before t_start: its 100 raw samples are used
+    assert push.force_samples[4] == 0 and np.all(np.delete(push.force_samples, 4) == 100)
+    centres = (np.arange(len(push)) - 0.5) / rate  # of the windows ending at t_k
     np.testing.assert_allclose(push.force[:, 0], 1.0 + 2.0 * centres, atol=1e-6)
+    assert push.force[0, 0] == pytest.approx(0.9, abs=1e-6)  # F(-0.05 s)
+
+
+def test_window_zero_without_earlier_force_is_the_first_reading(tmp_path):
+    """The ft stream starts at t_start (as in the real files): window 0 has no raw sample and
+    np.interp at its centre, -0.05 s, clamps to the first reading (not the ramp's 0.9)."""
+    t = _times(-0.05, 2.05, 250)
+    tip = np.stack([T0 + t, 0.3 + 0 * t, 0 * t, 0 * t], 1)
+    obj = np.stack([T0 + t, 0.35 + 0 * t, 0 * t, 0 * t], 1)
+    # first stamp at t_start = 0, then halfway between 1 kHz ticks (off the window edges)
+    tf = np.concatenate([[0.0], (np.arange(2100) + 0.5) / 1000])
+    fx = 1.0 + 2.0 * tf
+    ft = np.stack([T0 + tf, -fx, 0 * tf, 0 * tf], 1)
+    push = read_mit_push(
+        _write(tmp_path / _name(), {"tip_pose": tip, "object_pose": obj, "ft_wrench": ft}),
+        tare=False,
+    )
+    assert push.t0 == T0 and len(push) == 20
+    assert push.force_samples[0] == 0
+    assert push.force[0, 0] == 1.0  # the reading at t_start, exactly
+    # window 1, [0, 0.1): the reading at 0 and 100 samples with mean 1 + 2·0.05
+    assert push.force_samples[1] == 101
+    assert push.force[1, 0] == pytest.approx((1.0 + 100 * 1.1) / 101, abs=1e-9)
+    assert np.all(push.force_samples[2:] == 100)
+    centres = (np.arange(2, 20) - 0.5) / 10.0
+    np.testing.assert_allclose(push.force[2:, 0], 1.0 + 2.0 * centres, atol=1e-9)
+    np.testing.assert_allclose(push.force[:, 1], 0.0, atol=0)
+
+
+def test_force_step_appears_in_the_window_ending_after_it(tmp_path):
+    """Probe force steps to 2 N at 0.73 s and back to 0 at 1.52 s (1 kHz, off the edges).
+
+    Sample k averages [t_k - 0.1, t_k): the step first shows at sample 8 (window [0.7, 0.8),
+    70% of it after the step) and is full from sample 9; it ends at sample 16 (20% of [1.5,
+    1.6)). The old convention ([t_k, t_k + 0.1)) would show it one sample earlier.
+    """
+    t = _times(0.0, 2.0, 250)
+    tip = np.stack([T0 + t, 0.3 + 0.05 * t, 0 * t, 0 * t], 1)
+    obj = np.stack([T0 + t, 0.35 + 0.05 * t, 0 * t, 0 * t], 1)
+    tf = -0.1 + (np.arange(2200) + 0.5) / 1000
+    fx = np.where((tf > 0.73) & (tf < 1.52), 2.0, 0.0)
+    ft = np.stack([T0 + tf, -fx, 0 * tf, 0 * tf], 1)
+    push = read_mit_push(
+        _write(tmp_path / _name(), {"tip_pose": tip, "object_pose": obj, "ft_wrench": ft}),
+        tare=False,
+    )
+    expected = np.zeros(20)
+    expected[8] = 0.7 * 2.0
+    expected[9:16] = 2.0
+    expected[16] = 0.2 * 2.0
+    np.testing.assert_allclose(push.force[:, 0], expected, atol=1e-12)
+    np.testing.assert_array_equal(push.force[:, 1], 0.0)
+    np.testing.assert_array_equal(np.flatnonzero(push.contact), np.arange(8, 16))  # 0.4 < 0.5 N
+    # poses stay point samples at t_k
+    np.testing.assert_allclose(push.tip_pose[:, 0], 0.3 + 0.05 * push.times, atol=1e-9)
+
+
+def test_reader_matches_the_simulator_tactile_timing(tmp_path):
+    """A simulated push written as a MIT file reads back with the simulator's tactile samples.
+
+    The physics-rate force of step s (acting over ((s-1)·dt, s·dt]) is stamped at the step's
+    middle, so no raw sample sits on a window edge (the reader's windows are [ , ), the
+    simulator's ( , ]); 0.1 s of zero force before the push stands for the pad at rest.
+    """
+    from pushtoknow.common.params import ObjectParams
+    from pushtoknow.testbed.config import PushConfig, SimConfig
+    from pushtoknow.testbed.objects import ObjectSpec
+    from pushtoknow.testbed.push import Push
+    from pushtoknow.testbed.sim import PushSimulator
+
+    obj = mit_object("rect1")
+    spec = ObjectSpec(shape="rect1", params=ObjectParams(obj.mass, 0.3, 0.0, 0.0, obj.inertia))
+    sim = PushSimulator(spec, SimConfig(push=PushConfig(horizon=1.5), render=False))
+    try:
+        sim.reset((0.35, 0.02, 0.3))
+        cp = np.array([0.35, 0.02]) + 0.045 * np.array([-np.cos(0.3), -np.sin(0.3)])
+        push = Push((float(cp[0]), float(cp[1]) + 0.01), 0.3, "constant", 0.1)
+        rec = sim.execute(push, np.random.default_rng(0), render=False, trace=True)
+        dt = sim.model.opt.timestep
+    finally:
+        sim.close()
+    tr = rec.trace
+    n = len(tr["time"])
+    per = round(0.1 / dt)
+    s = np.arange(-per + 1, n + 1)  # steps; s <= 0: pad at rest before the push
+    tf = (s - 0.5) * dt
+    f = np.vstack([np.zeros((per, 2)), tr["force"]])
+    ft = np.column_stack([T0 + tf, -f, 0 * tf])  # the probe reads minus the force on the object
+    t_obj = np.concatenate([[0.0], tr["time"]])
+    pose = np.vstack([rec.pose[:1], tr["pose"]])
+    streams = {
+        "tip_pose": np.column_stack([T0 + rec.time, rec.pusher, 0 * rec.time]),
+        "object_pose": np.column_stack([T0 + t_obj, pose]),
+        "ft_wrench": ft,
+    }
+    mit = read_mit_push(_write(tmp_path / _name(v="100"), streams), tare=False)
+    k = len(mit)
+    assert k == len(rec.time) - 2  # the ft stream ends dt/2 before the others
+    assert np.all(mit.force_samples == per)
+    assert np.linalg.norm(rec.force_clean, axis=1).max() > 1.0  # it did push
+    np.testing.assert_allclose(mit.force, rec.force_clean[:k], rtol=0, atol=1e-9)
+    np.testing.assert_array_equal(rec.force_clean[0], 0.0)
+    # poses at t_k, as the images: exact up to the Unix-time rounding (2.4e-7 s at T0)
+    np.testing.assert_allclose(mit.object_pose, rec.pose[:k], rtol=0, atol=1e-6)
+    np.testing.assert_allclose(mit.tip_pose, rec.pusher[:k], rtol=0, atol=1e-6)
 
 
 def test_tare_sign_contact_and_friction(tmp_path, mit_ext):
@@ -249,8 +361,9 @@ def test_tare_sign_contact_and_friction(tmp_path, mit_ext):
     push = read_mit_push(p)
     assert len(push) == 20
     np.testing.assert_allclose(push.force_offset, offset, atol=1e-12)
+    # pushing during [0.5, 1.5) s: the windows [t_k - 0.1, t_k) of samples 6..15
     pushing = np.zeros(20, dtype=bool)
-    pushing[5:15] = True
+    pushing[6:16] = True
     # force on the object = −(reading − offset): +x, along the pusher's motion
     np.testing.assert_allclose(push.force[pushing], np.tile(f, (10, 1)), atol=1e-9)
     np.testing.assert_allclose(push.force[~pushing], 0.0, atol=1e-9)
@@ -492,6 +605,7 @@ def test_find_and_iter_filters(tmp_path):
 def test_real_files_parse_and_resample(mit_sample_dir):
     files = sorted(mit_sample_dir.glob("*.json"))
     assert len(files) == 3
+    spans = {}
     for f in files:
         push = read_mit_push(f)
         for name in ("tip_pose", "object_pose", "ft_wrench"):
@@ -499,12 +613,35 @@ def test_real_files_parse_and_resample(mit_sample_dir):
         assert len(push) == math.floor(push.duration * 10.0) > 5
         np.testing.assert_array_equal(push.times, np.arange(len(push)) / 10.0)
         assert np.all(np.isfinite(push.object_pose)) and np.all(np.isfinite(push.force))
-        assert np.all(push.force_samples > 0)  # ~25 raw samples per 0.1 s window
+        # Sample k averages the raw samples in [t_{k-1}, t_k) (~25 per 0.1 s window).
+        ft = push.raw.ft_wrench
+        tf = ft[:, 0] - push.t0
+        f_obj = -(ft[:, 1:3] - push.force_offset)
+        assert np.all(push.force_samples[1:] > 0)
+        for k in range(1, len(push)):
+            w = (tf >= push.times[k] - 0.1) & (tf < push.times[k])
+            assert push.force_samples[k] == w.sum()
+            np.testing.assert_allclose(push.force[k], f_obj[w].mean(axis=0), atol=1e-12)
+        # The force stream starts last in all three files: window 0 lies before it, and
+        # sample 0 is its first reading (np.interp clamps).
+        assert tf[0] == 0.0 and push.force_samples[0] == 0
+        np.testing.assert_array_equal(push.force[0], f_obj[0])
         assert push.contact.any() and not push.contact.all()  # rest before/after the push
+        assert not push.contact[0]  # (the first reading is taken at rest)
+        spans[f.name] = tuple(np.flatnonzero(push.contact)[[0, -1]])
         assert push.meta.speed == pytest.approx(0.1) and push.meta.acceleration == 0
         # off-centre / angled pushes rotate the block a lot
         if f.name != CENTRE_PUSH:
             assert abs(push.object_pose[-1, 2] - push.object_pose[0, 2]) > math.radians(20)
+        first, last = spans[f.name]
+        assert push.contact[first : last + 1].all()  # one contact phase
+    # Measured (first, last) contact samples: each contact window ends at its t_k, so contact
+    # is first felt in [t_{first-1}, t_first).
+    assert spans == {
+        "motion_surface=plywood_shape=rect1_a=0_v=100_i=0.000_s=0.000_t=0.000.json": (1, 5),
+        "motion_surface=plywood_shape=rect1_a=0_v=100_i=0.000_s=0.500_t=0.698.json": (2, 7),
+        CENTRE_PUSH: (2, 6),
+    }
 
 
 def test_real_centre_push_translates_with_plausible_friction(mit_sample_dir):

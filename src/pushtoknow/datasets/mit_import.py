@@ -21,18 +21,25 @@ Conventions of the converted data (all SI):
   needs μ > 0). Per-push estimates are stored as ``mit_friction`` (NaN when invalid), and the
   object's ``friction_source`` says which rule gave μ. An object is one shape on one surface:
   pushes are grouped by (surface, shape), since μ depends on the surface.
-- **Action.** profile "constant", speed = the file's v (m/s). Contact phase = first to last
-  sample with contact. direction = angle of the tip's displacement over the contact phase; if
-  that is shorter than `MIN_DIRECTION_DISPLACEMENT` (one contact sample), the displacement
-  over the whole push; if that is short too, from the tip towards the centroid. contact point
-  = the point of the object's boundary nearest the tip at the first contact sample, found in
-  the object frame at that sample and placed on the *initial* pose (the S_0 boundary, as
-  simulated actions are), shifted. The tip centre itself is `PUSHER_RADIUS` (4.7 mm) outside
-  it. A push with no contact sample uses sample 0.
+- **Action.** profile "constant", speed = the file's v (m/s). Contact samples are first..last
+  (the first and last sample with contact). Sample k's force is that of the window ending at
+  t_k (see Tactile), so contact is first felt in [t_{first} - 1/rate, t_first) and the contact
+  phase is the time from t_{onset} to t_last, onset = max(first - 1, 0): sample `onset` is the
+  last one before contact, the pusher's position when it reaches the object (0 when contact is
+  already felt in window 0). direction = angle of the tip's displacement from sample onset to
+  sample last; if that is shorter than `MIN_DIRECTION_DISPLACEMENT` (the tip hardly moved
+  while in contact), the displacement over the whole push; if that is short too, from the tip
+  towards the centroid at sample onset. contact point = the point of the object's boundary
+  nearest the tip at sample onset, found in the object frame at that sample and placed on the
+  *initial* pose (the S_0 boundary, as simulated actions are), shifted. The tip centre itself
+  is `PUSHER_RADIUS` (4.7 mm) outside it. A push with no contact sample uses sample 0 for
+  both.
 - **Tactile.** (F_x, F_y, contact) with the reader's force on the object in world axes, tared
-  and averaged over [t_k, t_k + 1/rate); contact ∈ {0, 1}. Real data have no noiseless force,
-  so ``force_clean`` holds the same measured force. Note the simulator averages over the
-  window *ending* at t_k and has zero force at sample 0; the reader's window *starts* at t_k.
+  and averaged over the window ending at t_k, [t_k - 1/rate, t_k), the simulator's timing;
+  contact ∈ {0, 1} (the reader's ‖F‖ > 0.5 N, not the simulator's contact share). Real data
+  have no noiseless force, so ``force_clean`` holds the same measured force. Sample 0 differs
+  from the simulator's, which is zero: it is the force of the window before t_start when the
+  force stream has samples there, else the first force reading (see `read_mit_push`).
 - **Pusher** = tip positions (shifted); the pad is rendered with the probe's radius.
 - The camera model (`CameraConfig`) is the simulator's default, 64 × 64 px, overhead at 0.75 m.
 
@@ -78,6 +85,7 @@ __all__ = [
     "IMPORT_FILE",
     "IMPORT_VERSION",
     "MIN_DIRECTION_DISPLACEMENT",
+    "TACTILE_CONVENTION",
     "MitRenderer",
     "convert_push",
     "import_mit_dataset",
@@ -90,7 +98,9 @@ __all__ = [
 ]
 
 IMPORT_FILE = "import.json"
-IMPORT_VERSION = 1  # bump when the conversion changes what is written
+# bump when the conversion changes what is written. 2: tactile sample k averages the window
+# ending at t_k (was: starting at t_k); contact spans shifted by one sample accordingly.
+IMPORT_VERSION = 2
 SOURCE_TAG = "mit-push"
 MIT_HEIGHT = DEFAULT_HEIGHT  # m, 13 mm stainless steel plates
 # μ placeholder when no push of an object gives a valid estimate: the middle of the catalogue's
@@ -107,6 +117,12 @@ FRICTION_CONVENTION = (
     "object mu = median of the valid per-push estimates mean|F|/(m g) over contact samples "
     f"(valid: a contact sample and mu in {list(FRICTION_VALID_RANGE)}), else {FALLBACK_FRICTION} "
     "(placeholder); per-push estimates stored as attribute mit_friction (NaN when invalid)"
+)
+TACTILE_CONVENTION = (
+    "tactile[k] = (F_x, F_y) on the object, world axes, tared, mean of the raw samples in "
+    "[t_k - 1/rate, t_k) (the window ending at t_k, as in the simulator); sample 0: raw samples "
+    "before t_start if any, else the first reading; contact = |F| > 0.5 N; mit_contact_span = "
+    "(first, last) sample with contact"
 )
 _PART_SUFFIX = ".part"
 
@@ -172,7 +188,11 @@ def _nearest_on_boundary(poly: np.ndarray, p: np.ndarray) -> np.ndarray:
 
 
 def _contact_span(push: MitPush) -> tuple[int, int]:
-    """(first, last) contact sample indices, (-1, -1) when the push never touches."""
+    """(first, last) contact sample indices, (-1, -1) when the push never touches.
+
+    Sample k's contact refers to the window ending at t_k, so the pusher pushed during
+    [t_first - 1/rate, t_last).
+    """
     idx = np.flatnonzero(push.contact)
     return (int(idx[0]), int(idx[-1])) if idx.size else (-1, -1)
 
@@ -186,8 +206,8 @@ def push_action(push: MitPush, shift: np.ndarray | None = None) -> Push:
     shift = push_shift(push) if shift is None else np.asarray(shift, dtype=np.float64)
     tip, pose = push.tip_pose, push.object_pose
     first, last = _contact_span(push)
-    k = max(first, 0)
-    d = tip[last] - tip[first] if first >= 0 else np.zeros(2)
+    k = max(first - 1, 0)  # onset: the last sample before contact (0 without contact)
+    d = tip[last] - tip[k] if first >= 0 else np.zeros(2)
     if np.linalg.norm(d) < MIN_DIRECTION_DISPLACEMENT:
         d = tip[-1] - tip[0]
     if np.linalg.norm(d) < MIN_DIRECTION_DISPLACEMENT:
@@ -257,7 +277,9 @@ def convert_push(push: MitPush, renderer: MitRenderer) -> tuple[PushRecord, dict
 
     The attributes (stored on the push's shard group): mit_file (str), mit_shift (2,) m,
     mit_t0 Unix s, mit_force_offset (2,) N, mit_friction (NaN if invalid),
-    mit_contact_span (first, last) sample indices, mit_meta (JSON of the file-name fields).
+    mit_contact_span (first, last) contact sample indices ((-1, -1) without contact; contact
+    during [t_first - 1/rate, t_last), see `_contact_span`), mit_meta (JSON of the file-name
+    fields).
     """
     shift = push_shift(push)
     pose = push.object_pose.copy()
@@ -366,7 +388,11 @@ def _write_shard_with_attrs(
         sim_config_json=sim_config_json,
     )
     with h5py.File(part, "r+") as f:
-        f.attrs.update(source=SOURCE_TAG, shift_convention=SHIFT_CONVENTION)
+        f.attrs.update(
+            source=SOURCE_TAG,
+            shift_convention=SHIFT_CONVENTION,
+            tactile_convention=TACTILE_CONVENTION,
+        )
         for ep, oa, pas in zip(episodes, object_attrs, push_attrs):
             g = f["objects"][str(ep.object_index)]
             g.attrs.update(oa)
@@ -447,6 +473,7 @@ def import_mit_dataset(
             **settings,
             "shift_convention": SHIFT_CONVENTION,
             "friction_convention": FRICTION_CONVENTION,
+            "tactile_convention": TACTILE_CONVENTION,
             "force_clean": "the measured force (real data have no noiseless force)",
             "object": f"MIT catalogue mass and I_z, CoM at the centroid, height {MIT_HEIGHT} m",
             "shards": [

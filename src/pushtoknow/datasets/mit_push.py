@@ -30,21 +30,31 @@ What the reader does (`read_mit_push`), in order:
    their negative, the force the pusher applies to the object, as the simulator's tactile
    sensor reports it (SPEC §3.1). The probe's own frame cannot be told apart from the world's
    here, because its yaw stays ~0.
-5. **Resample to a common clock** at ``rate`` Hz (default 10): the common span is the
-   intersection [t_start, t_end] of the three streams. There are
-   K = floor((t_end - t_start)·rate + `SAMPLE_COUNT_TOLERANCE`) samples at
-   t_k = t_start + k/rate, k = 0..K-1, so window k, [t_k, t_k + 1/rate), lies inside the span
-   (up to the tolerance).
-   Positions are linearly interpolated at t_k. Object yaw is unwrapped (``np.unwrap``) before
-   interpolation and stays unwrapped. The force of sample k is the mean of the raw samples in
-   window k, as the simulator's tactile sensor averages over its window. If a window holds no
-   raw sample, the force is interpolated at its centre. Times are re-zeroed:
-   ``times = k / rate``; ``t0`` keeps the Unix time of t_start.
+5. **Resample to a common clock** at ``rate`` Hz (default 10), with the simulator's tactile
+   timing (`pushtoknow.testbed.sim`): the common span is the intersection [t_start, t_end] of
+   the three streams. There are K = floor((t_end - t_start)·rate + `SAMPLE_COUNT_TOLERANCE`)
+   samples at t_k = t_start + k/rate, k = 0..K-1 (so t_{K-1} + 1/rate <= t_end, up to the
+   tolerance). Positions are linearly interpolated at t_k. Object yaw is unwrapped
+   (``np.unwrap``) before interpolation and stays unwrapped. The force of sample k is the mean
+   of the raw samples in the window that *ends* at t_k, [t_k - 1/rate, t_k) (a raw sample
+   stamped exactly t_k belongs to sample k+1): the force felt while the object moved into the
+   pose of t_k, as the simulator's tactile sensor averages over (t_k - 1/rate, t_k]. Window 0,
+   [t_start - 1/rate, t_start), lies before the common span; it uses the raw force samples
+   there when the force stream starts early enough to have any. A window with no raw sample
+   (for window 0: the force stream starts at t_start, as in all three sample files) takes
+   ``np.interp`` of the raw force at its centre t_k - 1/rate/2, linear between the raw samples
+   on either side; ``np.interp`` clamps to the first raw value before the stream starts, so in
+   that case sample 0 is the first raw reading (tared, sign flipped). The simulator's sample 0
+   is zero instead (its pad has not moved yet); a recording may already be pushing at t_start.
+   `MitPush.force_samples` counts the raw samples of each window (0: interpolated). Raw force
+   samples after t_{K-1} are not used. Times are re-zeroed: ``times = k / rate``; ``t0`` keeps
+   the Unix time of t_start.
 6. **Object frame.** `MitPush.object_pose` is the pose of the footprint centroid (SPEC §2). For
    the triangles the dataset's frame is not at the centroid (see `mit_object`); the raw poses
    stay in `MitPush.raw`.
-7. **Contact** is ‖force‖ > `CONTACT_FORCE_THRESHOLD` (0.5 N) on the window-averaged force.
-   Noise at rest averages to < 0.1 N, while pushing rect1 on plywood gives > 1.5 N.
+7. **Contact** is ‖force‖ > `CONTACT_FORCE_THRESHOLD` (0.5 N) on the window-averaged force, so
+   contact[k] refers to the window ending at t_k. Noise at rest averages to < 0.1 N, while
+   pushing rect1 on plywood gives > 1.5 N.
 
 MIT's own preprocessing (pdproc) corrects yaw jumps of multiples of π/2 in the full dataset.
 These are motion-capture flips on symmetric shapes. This reader does *not* correct them. A step
@@ -487,8 +497,11 @@ class MitPush:
     tip_pose: (K, 2) world (x, y) of the probe's centre (m). The probe is round, so its yaw
     is dropped; it is still in raw.tip_pose.
     force: (K, 2) N, world frame, force applied *to the object* by the pusher, tared, averaged
-    over [t_k, t_k + 1/rate). force_samples: (K,) raw samples in each window (0: interpolated).
-    contact: (K,) ‖force‖ > contact_threshold. force_offset: (2,) N, sensor offset subtracted
+    over the window ending at sample k, [t_k - 1/rate, t_k), as in the simulator (module doc,
+    item 5). Window 0 lies before t_start: its raw samples if the force stream has any there,
+    else the first raw reading. force_samples: (K,) raw samples in each window (0: interpolated
+    at the window's centre). contact: (K,) ‖force‖ > contact_threshold, so contact[k] says the
+    pusher pushed during the window before t_k. force_offset: (2,) N, sensor offset subtracted
     from the raw f_x, f_y (probe sign convention).
     """
 
@@ -540,8 +553,10 @@ def _force_offset(tip: np.ndarray, ft: np.ndarray) -> np.ndarray:
 
 
 def _window_means(t: np.ndarray, values: np.ndarray, rate: float, k: int) -> tuple:
-    """Mean of values over [i/rate, (i+1)/rate), i < k (t relative); empty windows interpolated."""
-    edges = np.arange(k + 1) / rate
+    """Mean of values over the windows [(i - 1)/rate, i/rate), i < k, that end at the samples
+    (t relative to t_start; window 0 lies before it). A window with no sample gets np.interp at
+    its centre (i - 1/2)/rate, which clamps to the first/last value outside the stream."""
+    edges = (np.arange(k + 1) - 1.0) / rate
     lo = np.searchsorted(t, edges[:-1], side="left")
     hi = np.searchsorted(t, edges[1:], side="left")
     counts = hi - lo
@@ -550,7 +565,7 @@ def _window_means(t: np.ndarray, values: np.ndarray, rate: float, k: int) -> tup
     full = counts > 0
     out[full] = (csum[hi[full]] - csum[lo[full]]) / counts[full, None]
     if not full.all():
-        centres = (np.flatnonzero(~full) + 0.5) / rate
+        centres = (np.flatnonzero(~full) - 0.5) / rate
         for j in range(values.shape[1]):
             out[~full, j] = np.interp(centres, t, values[:, j])
     return out, counts
