@@ -1,0 +1,256 @@
+"""Dual differentiable filter (paper §III-C, SPEC §3.4): Liu–West parameter update and
+conditional UKF pose update on a joint Gaussian belief over s = (ψ, φ̃)."""
+
+from __future__ import annotations
+
+import torch
+
+from pushtoknow.filters.base import BeliefFilter, FilterConfig, FilterNoise, UpdateInfo
+from pushtoknow.filters.constraints import StateConstraint
+from pushtoknow.filters.gaussian import (
+    DEFAULT_CHOLESKY,
+    CholeskyConfig,
+    circular_weighted_mean,
+    gaussian_log_likelihood_unnormalised,
+    safe_cholesky,
+    sample_gaussian,
+    symmetrize,
+    weighted_covariance,
+    weighted_cross_covariance,
+    weighted_mean,
+    wrap_residual,
+)
+from pushtoknow.filters.interfaces import (
+    DynamicsModel,
+    ObservationModel,
+    ObservationNoiseModel,
+    PoseObservation,
+)
+from pushtoknow.filters.liu_west import (
+    effective_sample_size,
+    liu_west_moments,
+    log_weights,
+    sanitise_log_likelihood,
+    tempering_exponent,
+)
+from pushtoknow.filters.ukf import ukf_update
+
+
+def regression_slope(
+    inputs: torch.Tensor,
+    outputs: torch.Tensor,
+    obs_angle_indices: tuple[int, ...] = (),
+    cholesky: CholeskyConfig = DEFAULT_CHOLESKY,
+) -> torch.Tensor:
+    """Statistical linear regression slope (B, M, N) of outputs (B, C, M) on inputs (B, C, N)
+    over C equally weighted samples: Cov(out, in) Cov(in)⁻¹ (angle outputs wrapped)."""
+    dev_in = inputs - inputs.mean(dim=1, keepdim=True)
+    out_mean = circular_weighted_mean(outputs, None, obs_angle_indices)
+    dev_out = wrap_residual(outputs - out_mean.unsqueeze(-2), obs_angle_indices)
+    cov_in = symmetrize(weighted_cross_covariance(dev_in, dev_in))
+    cross = weighted_cross_covariance(dev_in, dev_out)  # (B, N, M)
+    return torch.cholesky_solve(cross, safe_cholesky(cov_in, cholesky, "sample covariance")).mT
+
+
+class DualFilter(BeliefFilter):
+    """VT-DDF: one step = constrained Monte-Carlo prediction, then the dual update.
+
+    Update (SPEC §3.4 steps 3–6), predicted belief N(μ̄, Σ̄), observation z, noise R = R(z).
+    G = Σ̄_ψφ Σ̄_φ⁻¹ and Σ_ψ|φ = Σ̄_ψψ - G Σ̄_φψ describe the predicted N(ψ | φ).
+
+    * Parameters (Liu–West): C points φ_j with predicted observations Z_j, log-weights
+      -½ (Z_j - z)ᵀ R_w⁻¹ (Z_j - z) (angle residuals wrapped) normalised in log space; the
+      Liu–West moments of the weighted φ_j give μ_φ, Σ_φ. `config.param_weighting` chooses Z_j:
+      - "marginal" (default, Rao–Blackwellised): φ_j ~ N(μ̄_φ, Σ̄_φ), Z_j = h(ψ̂_j, φ_j) at the
+        conditional mean pose ψ̂_j = μ̄_ψ + G (φ_j - μ̄_φ), and R_w = R + P_zz where P_zz is the
+        unscented covariance of h(ψ, μ̄_φ) over N(ψ | φ): the pose is integrated out instead of
+        sampled. Exact for linear-Gaussian models.
+      - "joint_samples" (SPEC literal): χ'_j ~ N(μ̄, Σ̄), Z_j = h(χ'_j), R_w = R. The sampled
+        pose puts weight noise unrelated to φ into every update: the weighted variance of φ
+        shrinks by about (1 - 1/ESS) per step and its mean random-walks, so over long runs
+        (10²–10⁴ steps) Σ_φ collapses (see tests/filters/test_dual.py).
+      Models see project(point) (SPEC §3.4 step 1).
+    * Effective-sample-size guard (progressive correction): if the weights of the full
+      likelihood would have ESS < ess_min_fraction · C, only the tempered likelihood L^β is
+      applied, with the largest β keeping ESS = ess_min_fraction · C; the weighted moments
+      then define an intermediate Gaussian, which is resampled and weighted by the remaining
+      L^(1-β), and so on. Exponents add up to 1, so the whole likelihood is used; the last of
+      `max_tempering_stages` stages applies whatever exponent remains (its ESS may then be
+      lower). β is differentiable (implicit-function gradient, `liu_west.tempering_exponent`).
+      max_tempering_stages = 1 is the plain Liu–West update.
+    * Pose: N(ψ | φ = μ_φ) (eq. 14–15), UKF update (Merwe points) with h(ψ) = h(project(ψ,
+      μ_φ)) and noise R.
+    * Joint posterior bel(ψ|φ) bel(φ), mean (μ_ψ|φ⁺, μ_φ), covariance per
+      `config.cross_covariance`:
+      - "kept" (SPEC §3.4 step 6 / paper, literally): Σ = [[Σ_ψ|φ⁺ + C Σ_φ⁻¹ Cᵀ, C], [Cᵀ, Σ_φ]]
+        with C = Σ̄_ψφ. PSD, but as Σ_φ shrinks the pose variance C Σ_φ⁻¹ Cᵀ grows and the
+        ψ–φ correlation tends to ±1; with a precise pose observation that feeds back into
+        a collapse of Σ_φ and a diverging pose variance (see tests/filters/test_dual.py).
+      - "updated" (default): bel(ψ|φ) keeps its linear dependence on φ through the update,
+        E[ψ | φ, z] = μ_ψ|φ⁺ + G⁺ (φ - μ_φ) with G⁺ = G - K D, K the UKF gain and D the total
+        slope d h(ψ̂(φ), φ) / dφ (statistical linear regression over the stage-0 points); then
+        Σ = [[Σ_ψ|φ⁺ + G⁺ Σ_φ G⁺ᵀ, G⁺ Σ_φ], [Σ_φ G⁺ᵀ, Σ_φ]]. Also PSD by construction (its
+        Schur complement is Σ_ψ|φ⁺); exact for linear-Gaussian models up to the Monte-Carlo
+        error of the parameter weights.
+
+    An object whose observation has a non-finite entry keeps its predicted belief
+    (`UpdateInfo.skipped`); no NaN reaches the state or the gradients.
+    """
+
+    def __init__(
+        self,
+        dynamics: DynamicsModel,
+        observation: ObservationModel,
+        observation_noise: ObservationNoiseModel,
+        config: FilterConfig = FilterConfig(),
+        constraint: StateConstraint | None = None,
+    ):
+        super().__init__(dynamics, observation, observation_noise, config, constraint)
+
+    def _unscented_points(
+        self, pose_mean: torch.Tensor, pose_cov: torch.Tensor, params: torch.Tensor
+    ) -> torch.Tensor:
+        """Merwe points (B, 2P + 1, D) of N(ψ; pose_mean, pose_cov) with φ fixed to params."""
+        pts = self.config.sigma_points.points(pose_mean, pose_cov, self.config.cholesky)
+        return torch.cat([pts, params.unsqueeze(1).expand(-1, pts.shape[1], -1)], dim=-1)
+
+    def _unscented_obs_cov(self, z_pts: torch.Tensor) -> torch.Tensor:
+        """Unscented covariance P_zz (B, M, M) of the observations z_pts (B, 2P + 1, M) of
+        `_unscented_points`."""
+        wm, wc = self.config.sigma_points.weights(self.config.pose_dim, z_pts.dtype, z_pts.device)
+        angles = self.observation.angle_indices
+        z_mean = circular_weighted_mean(z_pts, wm.expand(z_pts.shape[0], -1), angles)
+        dz = wrap_residual(z_pts - z_mean.unsqueeze(-2), angles)
+        return symmetrize((dz * wc.unsqueeze(-1)).mT @ dz)
+
+    def update(
+        self,
+        mean: torch.Tensor,
+        cov: torch.Tensor,
+        observation: torch.Tensor,
+        context: object,
+        noise: FilterNoise | None = None,
+        generator: torch.Generator | None = None,
+    ) -> tuple[torch.Tensor, torch.Tensor, UpdateInfo]:
+        """Posterior (mean (B, D), cov (B, D, D), info) given the predicted belief and z (B, M)."""
+        cfg = self.config
+        b = self._check_belief(mean, cov)
+        self._check_context(context, b)
+        noise = self._resolve_noise(noise, generator, b, mean)
+        if noise.update is None or noise.update.shape[0] < 1:
+            raise ValueError("the dual update needs noise.update of shape (S ≥ 1, B, C, D)")
+        p = cfg.pose_dim
+        marginal = cfg.param_weighting == "marginal"
+        z, valid, r_diag = self._observation_and_noise(observation, context, mean)
+        angles = self.observation.angle_indices
+
+        # -- predicted conditional N(ψ | φ): slope G and covariance Σ_ψ|φ --------------------
+        pose_mean, param_mean_bar = mean[:, :p], mean[:, p:]
+        chol_phi_bar = safe_cholesky(cov[:, p:, p:], cfg.cholesky, "predicted Σ_φ")
+        slope = torch.cholesky_solve(cov[:, p:, :p], chol_phi_bar).mT  # G (B, P, K)
+        cond_cov = symmetrize(cov[:, :p, :p] - slope @ cov[:, p:, :p])
+        if marginal:  # h over N(ψ | φ = μ̄_φ), evaluated together with the stage-0 points
+            ut_states = self._unscented_points(pose_mean, cond_cov, param_mean_bar)
+        weight_noise = r_diag
+
+        # -- parameter update (Liu–West) with the ESS guard ------------------------------
+        stage_mean, stage_cov = (param_mean_bar, cov[:, p:, p:]) if marginal else (mean, cov)
+        remaining = torch.ones(b, dtype=mean.dtype, device=mean.device)
+        stages = torch.zeros(b, dtype=torch.long, device=mean.device)
+        num_stages = min(noise.update.shape[0], cfg.max_tempering_stages)
+        for stage in range(num_stages):
+            eps = noise.update[stage].to(mean.dtype)
+            eps = self.prepare_noise(eps[..., p:] if marginal else eps)
+            chol = safe_cholesky(stage_cov, cfg.cholesky, "tempering-stage covariance")
+            drawn = sample_gaussian(stage_mean, chol, eps)  # (B, C, K) or (B, C, D)
+            if marginal:
+                pose_hat = pose_mean.unsqueeze(1) + (drawn - param_mean_bar.unsqueeze(1)) @ slope.mT
+                points = torch.cat([pose_hat, drawn], dim=-1)
+            else:
+                points = drawn
+            if stage == 0 and marginal:  # one model call (one encoding in "mean" mode)
+                both = self._predict_observations(torch.cat([ut_states, points], 1), context)
+                n_ut = ut_states.shape[1]
+                predicted_obs = both[:, n_ut:]
+                obs_cov = self._unscented_obs_cov(both[:, :n_ut])
+                weight_noise = symmetrize(torch.diag_embed(r_diag) + obs_cov)
+            else:
+                predicted_obs = self._predict_observations(points, context)
+            if stage == 0:  # samples of the predicted belief, for the linearisation of h
+                first_points, first_obs = points, predicted_obs
+            residual = wrap_residual(predicted_obs - z.unsqueeze(-2), angles)
+            loglik = gaussian_log_likelihood_unnormalised(residual, weight_noise, cfg.cholesky)
+            loglik = torch.where(valid.unsqueeze(-1), loglik, torch.zeros_like(loglik))
+            loglik = sanitise_log_likelihood(loglik)
+            last = stage == num_stages - 1
+            if last:
+                beta = remaining
+            else:
+                target = cfg.ess_min_fraction * points.shape[1]
+                beta = tempering_exponent(loglik, remaining, target)
+            log_w = log_weights(loglik, beta)
+            weights = log_w.exp()
+            stages = stages + (beta.detach() > 0).long()
+            remaining = remaining - beta
+            if last or bool((remaining.detach() <= 0).all()):
+                break
+            stage_mean = weighted_mean(drawn, weights)
+            stage_cov = weighted_covariance(drawn, weights, stage_mean)
+        param_mean, param_cov, _ = liu_west_moments(points[..., p:], weights, cfg.liu_west_h)
+        ess = effective_sample_size(log_w)
+
+        # -- pose update: condition on φ = μ_φ, then UKF ---------------------------------
+        cond_mean = pose_mean + ((param_mean - param_mean_bar).unsqueeze(1) @ slope.mT).squeeze(1)
+
+        def observe(pose_points: torch.Tensor) -> torch.Tensor:
+            fixed = param_mean.unsqueeze(1).expand(-1, pose_points.shape[1], -1)
+            return self._predict_observations(torch.cat([pose_points, fixed], -1), context)
+
+        ukf = ukf_update(
+            cond_mean,
+            cond_cov,
+            z,
+            observe,
+            r_diag,
+            cfg.sigma_points,
+            cfg.pose_angle_indices,
+            angles,
+            cfg.cholesky,
+        )
+
+        # -- joint reassembly bel(ψ|φ) bel(φ) ---------------------------------------------
+        cross = cov[:, :p, p:]  # C = Σ̄_ψφ
+        if cfg.cross_covariance == "kept":
+            chol_phi = safe_cholesky(param_cov, cfg.cholesky, "parameter posterior Σ_φ")
+            reg = torch.cholesky_solve(cross.mT, chol_phi)  # Σ_φ⁻¹ Cᵀ
+            pose_cov = symmetrize(ukf.cov + cross @ reg)
+        else:
+            if marginal:  # the points vary along ψ̂(φ): their slope is the total derivative
+                total = regression_slope(first_points[..., p:], first_obs, angles, cfg.cholesky)
+            else:  # h ≈ H_ψ ψ + H_φ φ: total derivative along ψ̂(φ) is H_ψ G + H_φ
+                h = regression_slope(first_points, first_obs, angles, cfg.cholesky)
+                total = h[..., :p] @ slope + h[..., p:]
+            slope_post = slope - ukf.gain @ total
+            cross = slope_post @ param_cov
+            pose_cov = symmetrize(ukf.cov + cross @ slope_post.mT)
+        post_mean = torch.cat([ukf.mean, param_mean], dim=-1)
+        post_cov = torch.cat(
+            [torch.cat([pose_cov, cross], -1), torch.cat([cross.mT, param_cov], -1)],
+            dim=-2,
+        )
+        keep = valid.view(b, 1)
+        post_mean = torch.where(keep, post_mean, mean)
+        post_cov = torch.where(keep.unsqueeze(-1), post_cov, cov)
+        info = UpdateInfo(weights=weights, ess=ess, stages=stages, skipped=~valid)
+        return post_mean, post_cov, info
+
+
+def vision_only_filter(
+    dynamics: DynamicsModel,
+    pose_noise: ObservationNoiseModel,
+    config: FilterConfig = FilterConfig(),
+    constraint: StateConstraint | None = None,
+) -> DualFilter:
+    """V-DDF: the dual filter with z = z^V = (x, y, θ) only (no tactile model)."""
+    observation = PoseObservation(config.pose_dim, config.pose_angle_indices)
+    return DualFilter(dynamics, observation, pose_noise, config, constraint)

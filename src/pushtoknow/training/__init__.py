@@ -1,0 +1,1 @@
+"""Training: VisNet (supervised), then the filter's networks (supervised warm-up + end to end)."""

@@ -1,0 +1,192 @@
+"""Pushes of a dataset as tensors for training and evaluation.
+
+Everything the filter needs per push, images excepted (VisNet turns them into poses first):
+S_0, the object-frame footprint polygon estimated from S_0, poses, tactile, pusher track,
+the action, the true parameters and the footprint's symmetry order.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, fields
+from pathlib import Path
+
+import h5py
+import numpy as np
+import torch
+
+from pushtoknow.common.camera import CameraModel
+from pushtoknow.common.errors import DatasetError
+from pushtoknow.common.params import normalise_params
+from pushtoknow.datasets.shards import list_shards, open_shard
+from pushtoknow.geometry.affordances import mask_contour
+from pushtoknow.geometry.symmetry import symmetry_order
+from pushtoknow.testbed.config import SimConfig
+
+FOOTPRINT_VERTICES = 32  # footprint polygons resampled to this many vertices (batchable)
+
+
+def footprint_from_mask(s0: np.ndarray, camera: CameraModel, pose0, n: int = FOOTPRINT_VERTICES):
+    """Footprint polygon (n, 2) in the object frame (m) estimated from S_0 at pose0 (x, y, θ):
+    the mask contour resampled evenly by arc length, translated to its centroid and rotated by
+    −θ0."""
+    c = mask_contour(s0, camera)
+    pts = c.points
+    seg = np.linalg.norm(np.diff(np.vstack([pts, pts[:1]]), axis=0), axis=1)
+    s = np.concatenate([[0], np.cumsum(seg)])
+    q = np.linspace(0, s[-1], n, endpoint=False)
+    closed = np.vstack([pts, pts[:1]])
+    res = np.stack([np.interp(q, s, closed[:, 0]), np.interp(q, s, closed[:, 1])], 1)
+    res = res - c.centroid
+    th = -float(pose0[2])
+    R = np.array([[math.cos(th), -math.sin(th)], [math.sin(th), math.cos(th)]])
+    return res @ R.T
+
+
+@dataclass
+class PushTensors:
+    """N pushes of T samples (float32 unless said).
+
+    mask0 (N, 1, H, W) · pose (N, T, 3) true · tactile (N, T, 3) · force_clean (N, T, 2)
+    pusher (N, T, 2) · action (N, 5) · params (N, 5) SI (float64) · params_norm (N, 5)
+    footprint (N, V, 2) from S_0 · symmetry (N,) int64 · object_index (N,) int64
+    push_index (N,) int64 (order within its object) · vision_pose (N, T, 3) or None
+    """
+
+    mask0: torch.Tensor
+    pose: torch.Tensor
+    tactile: torch.Tensor
+    force_clean: torch.Tensor
+    pusher: torch.Tensor
+    action: torch.Tensor
+    params: torch.Tensor
+    params_norm: torch.Tensor
+    footprint: torch.Tensor
+    symmetry: torch.Tensor
+    object_index: torch.Tensor
+    push_index: torch.Tensor
+    camera: CameraModel
+    horizon_steps: int
+    vision_pose: torch.Tensor | None = None
+
+    def __len__(self) -> int:
+        return self.pose.shape[0]
+
+    def subset(self, idx) -> PushTensors:
+        idx = torch.as_tensor(idx, dtype=torch.long)
+        out = {}
+        for f in fields(self):
+            v = getattr(self, f.name)
+            out[f.name] = v[idx] if isinstance(v, torch.Tensor) else v
+        return PushTensors(**out)
+
+
+def dataset_camera(root: Path) -> tuple[CameraModel, SimConfig]:
+    shards = list_shards(root)
+    if not shards:
+        raise DatasetError(root, "no shards")
+    with h5py.File(shards[0], "r") as f:
+        cfg = SimConfig.model_validate(json.loads(f.attrs["sim_config"]))
+    return cfg.camera.model(), cfg
+
+
+def load_push_tensors(root: Path, max_objects: int | None = None) -> PushTensors:
+    """Read every push of a dataset (without images) into a `PushTensors`."""
+    root = Path(root)
+    camera, _ = dataset_camera(root)
+    cols: dict[str, list] = {
+        k: []
+        for k in (
+            "mask0",
+            "pose",
+            "tactile",
+            "force_clean",
+            "pusher",
+            "action",
+            "params",
+            "footprint",
+            "symmetry",
+            "object_index",
+            "push_index",
+        )
+    }
+    n_obj = 0
+    for s in list_shards(root):
+        with open_shard(s) as f:
+            for okey in sorted(f["objects"], key=int):
+                if max_objects is not None and n_obj >= max_objects:
+                    break
+                g = f["objects"][okey]
+                n_obj += 1
+                params = np.asarray(g.attrs["params"], np.float64)
+                for pk in sorted(g["pushes"], key=int):
+                    p = g["pushes"][pk]
+                    s0 = p["s0"][()]
+                    pose = p["pose"][()]
+                    fp = footprint_from_mask(s0, camera, pose[0])
+                    cols["mask0"].append(s0[None].astype(np.float32))
+                    cols["pose"].append(pose)
+                    cols["tactile"].append(p["tactile"][()])
+                    cols["force_clean"].append(p["force_clean"][()])
+                    cols["pusher"].append(p["pusher"][()])
+                    cols["action"].append(np.asarray(p.attrs["action"]))
+                    cols["params"].append(params)
+                    cols["footprint"].append(fp)
+                    cols["symmetry"].append(symmetry_order(fp))
+                    cols["object_index"].append(int(g.attrs["object_index"]))
+                    cols["push_index"].append(int(pk))
+    if not cols["pose"]:
+        raise DatasetError(root, "no pushes")
+    lengths = {len(x) for x in cols["pose"]}
+    if len(lengths) != 1:
+        raise DatasetError(root, f"pushes of different lengths {sorted(lengths)}")
+    f32 = {
+        k: torch.as_tensor(np.stack(cols[k]), dtype=torch.float32)
+        for k in ("mask0", "pose", "tactile", "force_clean", "pusher", "action", "footprint")
+    }
+    params = torch.as_tensor(np.stack(cols["params"]), dtype=torch.float64)
+    return PushTensors(
+        **f32,
+        params=params,
+        params_norm=normalise_params(params).float(),
+        symmetry=torch.as_tensor(cols["symmetry"]),
+        object_index=torch.as_tensor(cols["object_index"]),
+        push_index=torch.as_tensor(cols["push_index"]),
+        camera=camera,
+        horizon_steps=lengths.pop(),
+    )
+
+
+def load_frames(root: Path, every: int = 5, max_objects: int | None = None):
+    """Image frames for VisNet: every `every`-th frame of each push.
+
+    Returns VisNet inputs rgbd (F, 4, H, W) (`training.visnet.rgbd_input`), mask0 (F, 1, H, W),
+    pose (F, 3), pose0 (F, 3), push id (F,).
+    """
+    from pushtoknow.training.visnet import frames_as_tensors
+
+    rgbd, mask0, pose, pose0, pid = [], [], [], [], []
+    camera, _ = dataset_camera(root)
+    n_obj = push = 0
+    for s in list_shards(root):
+        with open_shard(s) as f:
+            for okey in sorted(f["objects"], key=int):
+                if max_objects is not None and n_obj >= max_objects:
+                    break
+                n_obj += 1
+                for pk in sorted(f["objects"][okey]["pushes"], key=int):
+                    p = f["objects"][okey]["pushes"][pk]
+                    ps = p["pose"][()]
+                    idx = np.arange(0, len(ps), every)
+                    rgbd.append(
+                        frames_as_tensors(p["rgb"][()][idx], p["depth"][()][idx], camera).numpy()
+                    )
+                    s0 = p["s0"][()].astype(np.float32)
+                    mask0.append(np.repeat(s0[None, None], len(idx), 0))
+                    pose.append(ps[idx])
+                    pose0.append(np.repeat(ps[:1], len(idx), 0))
+                    pid += [push] * len(idx)
+                    push += 1
+    t = lambda xs: torch.as_tensor(np.concatenate(xs), dtype=torch.float32)  # noqa: E731
+    return t(rgbd), t(mask0), t(pose), t(pose0), torch.as_tensor(pid)

@@ -1,0 +1,202 @@
+"""VisNet as a render-and-compare pose sensor, trained supervised (SPEC §3.6, first stage).
+
+VisNet sees the current RGB-D image and S_0 warped to a *reference pose* (at inference the
+filter's predicted mean; in training the true pose perturbed by noise) and outputs the pose of
+the object relative to that reference, (Δx, Δy, sin Δθ, cos Δθ). Because the residual is small
+(well below half of any shape's symmetry angle), symmetric shapes (rectangles, ellipses, hex)
+need no special treatment and the ±π wrap never arises. A disc's rotation is invisible: VisNet
+learns Δθ ≈ 0 there, i.e. the measurement carries no information about θ.
+Depth enters as height above the table in units of the object thickness.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+from pydantic import Field
+
+from pushtoknow.common.camera import CameraModel
+from pushtoknow.common.config import Config
+from pushtoknow.geometry.warp import warp_mask
+from pushtoknow.models.networks import VisNet, VisNetConfig
+from pushtoknow.testbed.objects import DEFAULT_HEIGHT
+
+
+class VisNetTrainConfig(Config):
+    epochs: int = Field(6, ge=1)
+    batch_size: int = Field(128, ge=1)
+    lr: float = Field(2e-3, gt=0)
+    weight_decay: float = Field(1e-5, ge=0)
+    ref_noise_xy: float = Field(0.01, ge=0, description="std of the reference offset (m)")
+    ref_noise_theta: float = Field(0.15, ge=0, description="std of the reference turn (rad)")
+    ref_noise_theta_max: float = Field(0.45, gt=0, description="clip (rad) < π/6 (hex)")
+    frame_every: int = Field(5, ge=1, description="use every n-th frame of each push")
+    val_fraction: float = Field(0.1, ge=0, lt=1)
+    position_weight: float = Field(1.0, gt=0)
+    net: VisNetConfig = VisNetConfig(
+        in_channels=6, image_size=32, channels=(32, 32, 64, 64), strides=(1, 2, 2, 2)
+    )
+
+
+def rgbd_input(rgb: torch.Tensor, depth: torch.Tensor, camera: CameraModel) -> torch.Tensor:
+    """rgb (N, 3, H, W) in [0, 1] and depth (N, 1, H, W) metres → VisNet's (N, 4, H, W)."""
+    height = (camera.position[2] - depth) / DEFAULT_HEIGHT
+    return torch.cat([rgb, height], dim=1)
+
+
+def perturb(pose: torch.Tensor, cfg: VisNetTrainConfig, gen: torch.Generator) -> torch.Tensor:
+    """Reference poses: pose (N, 3) plus Gaussian noise (θ clipped)."""
+    n = pose.shape[0]
+    dxy = torch.randn(n, 2, generator=gen) * cfg.ref_noise_xy
+    dth = (torch.randn(n, generator=gen) * cfg.ref_noise_theta).clamp(
+        -cfg.ref_noise_theta_max, cfg.ref_noise_theta_max
+    )
+    return pose + torch.cat([dxy, dth[:, None]], 1)
+
+
+def visnet_inputs(rgbd, mask0, pose0, ref, camera: CameraModel, crop: int):
+    """VisNet's inputs: a crop×crop window (native resolution) centred on the reference
+    position of [RGB, height, height − Ŝ_ref] (the last channel shows the misalignment, which
+    makes small rotations visible), and Ŝ_ref: S_0 warped to the reference pose."""
+    s_ref = warp_mask(mask0, ref, pose0, camera)
+    x = torch.cat([rgbd, rgbd[:, 3:4].clamp(0, 1) - s_ref, s_ref], dim=1)
+    n = x.shape[0]
+    f = camera.focal_px / camera.position[2]
+    cu, cv = camera.principal_point
+    u = cu + f * (ref[:, 0] - camera.position[0])
+    v = cv - f * (ref[:, 1] - camera.position[1])
+    centre = torch.stack([(2 * u + 1) / camera.width - 1, (2 * v + 1) / camera.height - 1], -1)
+    scale = torch.tensor([crop / camera.width, crop / camera.height], dtype=x.dtype)
+    theta = torch.cat([torch.diag_embed(scale.expand(n, 2)), centre[:, :, None]], -1)
+    grid = F.affine_grid(theta, [n, x.shape[1], crop, crop], align_corners=False)
+    w = F.grid_sample(x, grid, mode="bilinear", padding_mode="zeros", align_corners=False)
+    return w[:, :-1], w[:, -1:]
+
+
+def visnet_loss(net: VisNet, rgbd, mask0, pose, pose0, ref, camera, position_weight=1.0):
+    """MSE between VisNet's relative pose and the truth relative to the reference."""
+    out = net(*visnet_inputs(rgbd, mask0, pose0, ref, camera, net.config.image_size))
+    target = VisNet.pose_to_target(pose, ref)
+    scale = net.config.position_scale
+    pos = ((out[:, :2] - target[:, :2]) / scale).square().sum(-1)
+    ang = (out[:, 2:] - target[:, 2:]).square().sum(-1)
+    return (position_weight * pos + ang).mean()
+
+
+@torch.no_grad()
+def visnet_measure(net: VisNet, rgbd, mask0, pose0, ref, camera) -> torch.Tensor:
+    """Pose measurement (N, 3) = reference ⊕ VisNet residual."""
+    rel = net(*visnet_inputs(rgbd, mask0, pose0, ref, camera, net.config.image_size))
+    return VisNet.to_pose(rel, ref)
+
+
+@dataclass
+class VisNetResult:
+    net: VisNet
+    history: list[dict]
+    val_error: dict
+
+
+def train_visnet(
+    frames, camera: CameraModel, cfg: VisNetTrainConfig, seed: int = 0, log=None, progress=None
+) -> VisNetResult:
+    """frames = (rgbd (F,4,H,W), mask0 (F,1,H,W), pose (F,3), pose0 (F,3), push id (F,)).
+
+    Validation split by push (no frame of a validation push is trained on).
+    """
+    rgbd, mask0, pose, pose0, pid = frames
+    torch.manual_seed(seed)
+    gen = torch.Generator().manual_seed(seed)
+    pushes = torch.unique(pid)
+    perm = pushes[torch.randperm(len(pushes), generator=gen)]
+    n_val = int(round(cfg.val_fraction * len(pushes)))
+    val_mask = torch.isin(pid, perm[:n_val])
+    tr = torch.nonzero(~val_mask).squeeze(1)
+    va = torch.nonzero(val_mask).squeeze(1)
+    net = VisNet(cfg.net)
+    opt = torch.optim.AdamW(net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
+    steps = cfg.epochs * math.ceil(len(tr) / cfg.batch_size)
+    sched = torch.optim.lr_scheduler.OneCycleLR(opt, cfg.lr, total_steps=steps)
+    val_gen = torch.Generator().manual_seed(seed + 1)
+    val_ref = perturb(pose[va], cfg, val_gen)
+    history = []
+    task = progress.add_task("VisNet", total=steps) if progress else None
+    for epoch in range(cfg.epochs):
+        net.train()
+        t0 = time.perf_counter()
+        order = tr[torch.randperm(len(tr), generator=gen)]
+        total = 0.0
+        for i in range(0, len(order), cfg.batch_size):
+            b = order[i : i + cfg.batch_size]
+            ref = perturb(pose[b], cfg, gen)
+            loss = visnet_loss(
+                net, rgbd[b], mask0[b], pose[b], pose0[b], ref, camera, cfg.position_weight
+            )
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+            sched.step()
+            total += loss.item() * len(b)
+            if progress:
+                progress.advance(task)
+        err = evaluate_visnet(net, rgbd[va], mask0[va], pose[va], pose0[va], val_ref, camera)
+        row = {
+            "epoch": epoch + 1,
+            "train_loss": total / max(len(tr), 1),
+            "seconds": time.perf_counter() - t0,
+            **{f"val_{k}": v for k, v in err.items()},
+        }
+        history.append(row)
+        if log:
+            log(row)
+    net.eval()
+    return VisNetResult(net, history, history[-1] if history else {})
+
+
+@torch.no_grad()
+def evaluate_visnet(net, rgbd, mask0, pose, pose0, ref, camera, batch=512) -> dict:
+    """RMS position error (mm) and median |θ error| (deg) of measurements vs truth, and the
+    same for the reference itself (what VisNet must beat)."""
+    if len(pose) == 0:
+        return {}
+    net.eval()
+    meas = torch.cat(
+        [
+            visnet_measure(
+                net,
+                rgbd[i : i + batch],
+                mask0[i : i + batch],
+                pose0[i : i + batch],
+                ref[i : i + batch],
+                camera,
+            )
+            for i in range(0, len(pose), batch)
+        ]
+    )
+
+    def errs(p):
+        d = (p[:, :2] - pose[:, :2]).norm(dim=-1)
+        dth = torch.remainder(p[:, 2] - pose[:, 2] + math.pi, 2 * math.pi) - math.pi
+        return float(d.square().mean().sqrt() * 1e3), float(dth.abs().median() * 180 / math.pi)
+
+    m_xy, m_th = errs(meas)
+    r_xy, r_th = errs(ref)
+    net.train()
+    return {
+        "xy_rmse_mm": m_xy,
+        "theta_med_deg": m_th,
+        "ref_xy_rmse_mm": r_xy,
+        "ref_theta_med_deg": r_th,
+    }
+
+
+def frames_as_tensors(rgb: np.ndarray, depth: np.ndarray, camera: CameraModel) -> torch.Tensor:
+    """(T, H, W, 3) uint8 and (T, H, W) float → (T, 4, H, W) VisNet input."""
+    r = torch.as_tensor(rgb).permute(0, 3, 1, 2).float() / 255.0
+    d = torch.as_tensor(depth, dtype=torch.float32)[:, None]
+    return rgbd_input(r, d, camera)
