@@ -31,11 +31,11 @@ def test_paper_layer_counts_and_output_shapes():
     assert enc(torch.rand(5, 2, 64, 64)).shape == (5, 64)
     proc = ProcessNet()
     assert count_layers(proc, nn.Linear) == 4  # 3 FC layers, the first split in two halves
-    delta, q = proc(torch.randn(2, 7, 12), torch.randn(2, 1, 64))  # shared encoding
+    delta, q = proc(torch.randn(2, 7, 17), torch.randn(2, 1, 64))  # shared encoding
     assert delta.shape == q.shape == (2, 7, 3)
     tac = TacNet()
     assert count_layers(tac, nn.Linear) == 5  # 4 FC layers, the first split in two halves
-    forces, logit = tac(torch.randn(6, 12), torch.randn(6, 64))
+    forces, logit = tac(torch.randn(6, 17), torch.randn(6, 64))
     assert forces.shape == (6, 2) and logit.shape == (6,)
     noise = ObsNoiseNet()
     assert count_layers(noise, nn.Linear) == 2
@@ -47,7 +47,7 @@ def test_paper_layer_counts_and_output_shapes():
 
 def test_split_first_layer_equals_the_concatenated_mlp():
     proc = ProcessNet().double()
-    f, e = torch.randn(3, 12, dtype=torch.float64), torch.randn(3, 64, dtype=torch.float64)
+    f, e = torch.randn(3, 17, dtype=torch.float64), torch.randn(3, 64, dtype=torch.float64)
     w = torch.cat([proc.mlp.first_features.weight, proc.mlp.first_enc.weight], dim=1)
     h = torch.relu(torch.cat([f, e], -1) @ w.T + proc.mlp.first_features.bias)
     out = proc.mlp.rest[1](h)
@@ -60,7 +60,7 @@ def test_process_and_observation_noise_are_positive_and_floored():
     for net in (proc, noise):
         for p in net.parameters():
             nn.init.constant_(p, -50.0)  # drives softplus to 0: the floor must hold
-    _, q = proc(torch.ones(4, 12), torch.ones(4, 64))
+    _, q = proc(torch.ones(4, 17), torch.ones(4, 64))
     floor_q = torch.tensor(ProcessNetConfig().q_floor_std) ** 2
     assert (q >= floor_q * (1 - 1e-5)).all() and torch.isfinite(q).all()
     r = noise(torch.ones(4, 5))
@@ -116,7 +116,7 @@ def test_visnet_output_is_unit_direction_and_backbone_hook():
 def test_network_shape_errors_and_config_validation():
     with pytest.raises(ShapeError, match=r"expected shape \(N, 2, 64, 64\), got \(1, 2, 32, 32\)"):
         ShapeActionEncoderNet()(torch.rand(1, 2, 32, 32))
-    with pytest.raises(ShapeError, match=r"TacNet features: expected shape \(\.\.\., 12\)"):
+    with pytest.raises(ShapeError, match=r"TacNet features: expected shape \(\.\.\., 17\)"):
         TacNet()(torch.rand(3, 11), torch.rand(3, 64))
     with pytest.raises(ShapeError, match="VisNet rgbd"):
         VisNet()(torch.rand(1, 3, 64, 64), torch.rand(1, 1, 64, 64))

@@ -119,7 +119,7 @@ class ProcessNetConfig(Config):
     so Q ≥ q_floor_std² (m², m², rad²).
     """
 
-    input_dim: int = 12
+    input_dim: int = 17
     enc_dim: int = 64
     hidden_dims: tuple[int, int] = (128, 128)
     pose_dim: int = 3
@@ -168,7 +168,7 @@ class TacNetConfig(Config):
     """TacNet: 4 FC on (sigma-point features, enc) → (F_x, F_y) (N, world frame) and a
     contact logit. Forces = force_scale ⊙ out."""
 
-    input_dim: int = 12
+    input_dim: int = 17
     enc_dim: int = 64
     hidden_dims: tuple[int, int, int] = (128, 128, 64)
     force_scale: float = 5.0
