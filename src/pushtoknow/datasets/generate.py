@@ -20,7 +20,7 @@ from pushtoknow.common.config import Config
 from pushtoknow.common.errors import DatasetError, ObjectSpecError
 from pushtoknow.datasets.shards import (
     ObjectEpisode,
-    open_shard,
+    shard_is_finished,
     shard_path,
     write_shard,
 )
@@ -116,19 +116,6 @@ def shard_plan(cfg: GenerationConfig) -> list[list[int]]:
     return [list(range(s, min(s + k, cfg.objects))) for s in range(0, cfg.objects, k)]
 
 
-def _finished(path: Path, fingerprint: str) -> bool:
-    if not path.exists():
-        return False
-    with open_shard(path) as f:  # raises DatasetError naming a corrupt shard
-        if f.attrs.get("fingerprint") != fingerprint:
-            raise DatasetError(
-                path,
-                "written by a different generation (objects, seed or "
-                "config differ); use another --out directory",
-            )
-    return True
-
-
 def generate_dataset(
     out: Path, cfg: GenerationConfig, workers: int = 1, progress: bool = True
 ) -> dict:
@@ -157,7 +144,7 @@ def generate_dataset(
     todo = [
         (str(out), i, idx, cfg.model_dump_json())
         for i, idx in enumerate(plan)
-        if not _finished(shard_path(out, i), cfg.fingerprint())
+        if not shard_is_finished(shard_path(out, i), cfg.fingerprint())
     ]
     skipped = len(plan) - len(todo)
     n_objects = sum(len(t[2]) for t in todo)

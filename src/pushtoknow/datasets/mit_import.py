@@ -73,7 +73,12 @@ from pushtoknow.datasets.mit_push import (
     mit_polygon,
     read_mit_push,
 )
-from pushtoknow.datasets.shards import ObjectEpisode, open_shard, shard_path, write_shard
+from pushtoknow.datasets.shards import (
+    ObjectEpisode,
+    shard_is_finished,
+    shard_path,
+    write_shard,
+)
 from pushtoknow.testbed.config import PadConfig, SimConfig, TactileConfig
 from pushtoknow.testbed.objects import DEFAULT_HEIGHT, ObjectSpec
 from pushtoknow.testbed.push import Push
@@ -355,19 +360,6 @@ def _fingerprint(src: Path, plan: list[list[dict]], settings: dict) -> str:
     return hashlib.sha256(blob.encode()).hexdigest()[:16]
 
 
-def _finished(path: Path, fingerprint: str) -> bool:
-    if not path.exists():
-        return False
-    with open_shard(path) as f:  # raises DatasetError naming a corrupt shard
-        if f.attrs.get("fingerprint") != fingerprint:
-            raise DatasetError(
-                path,
-                "written by a different import or generation (source files, filters or "
-                "settings differ); use another --out directory",
-            )
-    return True
-
-
 def _write_shard_with_attrs(
     path: Path,
     episodes: list[ObjectEpisode],
@@ -499,7 +491,7 @@ def import_mit_dataset(
     for stale in [*out.glob("*.h5.tmp"), *out.glob(f"*.h5{_PART_SUFFIX}")]:
         stale.unlink()
 
-    todo = [i for i in range(len(plan)) if not _finished(shard_path(out, i), fingerprint)]
+    todo = [i for i in range(len(plan)) if not shard_is_finished(shard_path(out, i), fingerprint)]
     skipped = len(plan) - len(todo)
     total = sum(len(o["files"]) for i in todo for o in plan[i])
 

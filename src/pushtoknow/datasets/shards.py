@@ -116,6 +116,23 @@ def open_shard(path: Path) -> h5py.File:
     return f
 
 
+def shard_is_finished(path: Path, fingerprint: str) -> bool:
+    """True if a complete shard written with this fingerprint exists at `path` (resume).
+
+    Raises DatasetError naming the file if it is corrupt or was written with other settings.
+    """
+    if not Path(path).exists():
+        return False
+    with open_shard(path) as f:
+        if f.attrs.get("fingerprint") != fingerprint:
+            raise DatasetError(
+                path,
+                "written with other settings (objects, source files, seed or config differ); "
+                "use another --out directory",
+            )
+    return True
+
+
 def _read(path: Path, grp, name: str):
     try:
         return grp[name][()]
