@@ -25,20 +25,15 @@ class SpeedProfile:
     def speed(self, t: float) -> float:
         return float(np.interp(t, self.times, self.speeds))
 
-    def distance(self, t: float) -> float:
-        """Distance travelled by time t (m)."""
+    def distance(self, t):
+        """Distance travelled by time t (m); t a float or an array of times."""
         ts, vs = np.asarray(self.times), np.asarray(self.speeds)
-        t = float(t)
-        d = 0.0
-        for i in range(len(ts) - 1):
-            if t <= ts[i]:
-                break
-            t1 = min(t, ts[i + 1])
-            v1 = np.interp(t1, ts, vs)
-            d += 0.5 * (vs[i] + v1) * (t1 - ts[i])
-        if t > ts[-1]:
-            d += vs[-1] * (t - ts[-1])
-        return float(d)
+        knots = np.concatenate([[0.0], np.cumsum(0.5 * (vs[1:] + vs[:-1]) * np.diff(ts))])
+        t = np.asarray(t, dtype=np.float64)
+        k = np.clip(np.searchsorted(ts, t, side="right") - 1, 0, len(ts) - 1)
+        d = knots[k] + 0.5 * (vs[k] + np.interp(t, ts, vs)) * (t - ts[k])
+        d = np.where(t <= ts[0], 0.0, d)
+        return float(d) if d.ndim == 0 else d
 
     @property
     def peak_speed(self) -> float:

@@ -222,7 +222,7 @@ class PushSimulator:
         # Pad trajectory at every physics step, computed once (the loop only copies it in).
         n_steps = n_samples * steps_per_sample
         t_steps = np.arange(n_steps) * dt
-        pad_pos = start[None] + np.outer([profile.distance(t) for t in t_steps], u)
+        pad_pos = start[None] + np.outer(profile.distance(t_steps), u)
         pad_vel = np.outer(np.interp(t_steps, profile.times, profile.speeds), u)
 
         model, data = self.model, self.data

@@ -2,7 +2,7 @@
 
 Everything the filter needs per push, images excepted (VisNet turns them into poses first):
 S_0, the object-frame footprint polygon estimated from S_0, poses, tactile, pusher track,
-the action, the true parameters and the footprint's symmetry order.
+the action and the true parameters.
 """
 
 from __future__ import annotations
@@ -21,7 +21,6 @@ from pushtoknow.common.errors import DatasetError
 from pushtoknow.common.params import normalise_params
 from pushtoknow.datasets.shards import list_shards, open_shard
 from pushtoknow.geometry.affordances import mask_contour
-from pushtoknow.geometry.symmetry import symmetry_order
 from pushtoknow.testbed.config import SimConfig
 
 FOOTPRINT_VERTICES = 32  # footprint polygons resampled to this many vertices (batchable)
@@ -50,7 +49,7 @@ class PushTensors:
 
     mask0 (N, 1, H, W) · pose (N, T, 3) true · tactile (N, T, 3) · force_clean (N, T, 2)
     pusher (N, T, 2) · action (N, 5) · params (N, 5) SI (float64) · params_norm (N, 5)
-    footprint (N, V, 2) from S_0 · symmetry (N,) int64 · object_index (N,) int64
+    footprint (N, V, 2) from S_0 · object_index (N,) int64
     push_index (N,) int64 (order within its object) · vision_pose (N, T, 3) or None
     """
 
@@ -63,7 +62,6 @@ class PushTensors:
     params: torch.Tensor
     params_norm: torch.Tensor
     footprint: torch.Tensor
-    symmetry: torch.Tensor
     object_index: torch.Tensor
     push_index: torch.Tensor
     camera: CameraModel
@@ -106,7 +104,6 @@ def load_push_tensors(root: Path, max_objects: int | None = None) -> PushTensors
             "action",
             "params",
             "footprint",
-            "symmetry",
             "object_index",
             "push_index",
         )
@@ -133,7 +130,6 @@ def load_push_tensors(root: Path, max_objects: int | None = None) -> PushTensors
                     cols["action"].append(np.asarray(p.attrs["action"]))
                     cols["params"].append(params)
                     cols["footprint"].append(fp)
-                    cols["symmetry"].append(symmetry_order(fp))
                     cols["object_index"].append(int(g.attrs["object_index"]))
                     cols["push_index"].append(int(pk))
     if not cols["pose"]:
@@ -150,7 +146,6 @@ def load_push_tensors(root: Path, max_objects: int | None = None) -> PushTensors
         **f32,
         params=params,
         params_norm=normalise_params(params).float(),
-        symmetry=torch.as_tensor(cols["symmetry"]),
         object_index=torch.as_tensor(cols["object_index"]),
         push_index=torch.as_tensor(cols["push_index"]),
         camera=camera,
