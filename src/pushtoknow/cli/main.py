@@ -41,7 +41,9 @@ def simulate(
     seed: int = typer.Option(0, "--seed"),
     workers: int = typer.Option(1, "--workers", min=1),
     objects_from: str = typer.Option(
-        "catalogue", "--objects-from", help="catalogue | continuous | FILE (JSON/YAML specs)"
+        "catalogue",
+        "--objects-from",
+        help="catalogue | catalogue-train | catalogue-test | continuous | FILE (JSON/YAML specs)",
     ),
     profiles: str = typer.Option(
         "constant", "--profiles", help="comma-separated speed profiles: constant,release"
@@ -210,23 +212,178 @@ def _print_push_summary(spec, s: dict) -> None:
 
 
 @app.command()
+def train(
+    data: Path = typer.Option(..., "--data", help="dataset directory (`pushtoknow simulate`)"),
+    out: Path = typer.Option(..., "--out", help="run directory to write"),
+    variant: str = typer.Option("vt-addf", "--variant", help="vt-addf | vt-jdf | v-ddf"),
+    config: Path = typer.Option(None, "--config", help="YAML TrainConfig"),
+    seed: int = typer.Option(0, "--seed"),
+    visnet_from: Path = typer.Option(
+        None, "--visnet-from", help="reuse the VisNet of this run instead of training one"
+    ),
+):
+    """Train VisNet, then the filter's networks (supervised, then end to end), calibrate the
+    inference settings, and write RUN/model.pt with configs, curves and training.json."""
+    from pushtoknow.training.pipeline import TrainConfig, train_model
+
+    if variant not in ("vt-addf", "vt-jdf", "v-ddf"):
+        _fail(ValueError(f"--variant must be vt-addf, vt-jdf or v-ddf, got {variant!r}"))
+    cfg = TrainConfig.from_yaml(config) if config else TrainConfig()
+    cfg = cfg.model_copy(update={"variant": variant})
+
+    def echo(stage: str, row: dict) -> None:
+        keys = [k for k in row if k.startswith("val_") or k in ("epoch", "step", "train_loss")]
+        brief = ", ".join(
+            f"{k}={row[k]:.4g}" if isinstance(row[k], float) else f"{k}={row[k]}" for k in keys[:7]
+        )
+        err_console.print(f"[dim]{stage}[/] {brief}")
+
+    model = train_model(data, out, cfg, seed, visnet_from=visnet_from, echo=echo)
+    console.print(
+        f"wrote {out / 'model.pt'} ({model.info['timings']['total_s']:.0f} s); "
+        f"inference settings: {model.inference.model_dump()}"
+    )
+
+
+# how parameters are shown: (factor from SI, unit)
+DISPLAY_UNITS = {
+    "mass": (1.0, "kg"),
+    "friction": (1.0, ""),
+    "com_x": (1e3, "mm"),
+    "com_y": (1e3, "mm"),
+    "inertia": (1e3, "g·m²"),
+}
+
+
+def _format_estimate(mean: float, std: float, name: str) -> str:
+    scale, unit = DISPLAY_UNITS[name]
+    return f"{mean * scale:.3g} ± {std * scale:.2g} {unit}".strip()
+
+
+def _estimate_table(estimate, truth, title: str) -> Table:
+    from pushtoknow.common.params import PARAM_NAMES
+
+    t = Table(title=title, title_justify="left")
+    t.add_column("parameter")
+    t.add_column("estimate (mean ± std)", justify="right")
+    if truth is not None:
+        t.add_column("truth", justify="right")
+        t.add_column("|error| / std", justify="right")
+    for j, name in enumerate(PARAM_NAMES):
+        row = [name, _format_estimate(estimate.mean[j], estimate.std[j], name)]
+        if truth is not None:
+            scale, unit = DISPLAY_UNITS[name]
+            z = abs(estimate.mean[j] - truth[j]) / max(estimate.std[j], 1e-12)
+            row += [f"{truth[j] * scale:.3g} {unit}".strip(), f"{z:.1f}"]
+        t.add_row(*row)
+    return t
+
+
+def run_inference(
+    model_ref: str,
+    object_ref: str,
+    pushes: int,
+    policy: str,
+    seed: int,
+    out: Path | None,
+    as_json: bool,
+    strip: bool = False,
+    sigma_points: int | None = None,
+) -> dict:
+    """Shared by `infer` and `demo`: K pushes on the testbed, tables, plot, JSON."""
+    from pushtoknow.inference.session import (
+        POLICIES,
+        InferenceConfig,
+        active_scorer,
+        infer_object,
+    )
+    from pushtoknow.models.checkpoint import load_checkpoint
+    from pushtoknow.pretrained import resolve_model_path
+    from pushtoknow.testbed.config import SimConfig
+    from pushtoknow.testbed.executor import SimulatedExecutor
+    from pushtoknow.testbed.objects import load_object_spec
+    from pushtoknow.viz import plot_estimates, save_push_strip
+
+    if policy not in POLICIES:
+        raise typer.BadParameter(f"--policy must be one of {', '.join(POLICIES)}")
+    model = load_checkpoint(resolve_model_path(model_ref))
+    spec = load_object_spec(object_ref)
+    truth = spec.params.as_array()
+    show = Console(stderr=True) if as_json else console
+    sim_cfg = SimConfig()
+    cfg = InferenceConfig(pushes=pushes, policy=policy, num_sigma_points=sigma_points)
+    scorer = active_scorer(policy, sim_cfg) if policy.startswith("active") else None
+    ex = SimulatedExecutor(spec, sim_cfg, seed=seed, recentre=True)
+    show.print(
+        f"[bold]{spec.name or 'object'}[/] ({spec.shape if isinstance(spec.shape, str) else ''})"
+        f", model {model.variant} ({model_ref}), policy {policy}, {pushes} pushes, seed {seed}"
+    )
+    try:
+        ex.observe()
+
+        def on_push(e) -> None:
+            show.print(_estimate_table(e, truth, f"after push {e.index}"))
+
+        result = infer_object(
+            model,
+            ex,
+            cfg,
+            seed,
+            initial_pose=ex.initial_pose,
+            truth=truth,
+            object_name=spec.name or "",
+            on_push=on_push,
+            active_scorer=scorer,
+        )
+    finally:
+        ex.close()
+    report = result.to_json()
+    if out is not None:
+        out.mkdir(parents=True, exist_ok=True)
+        plot_estimates(result, out / "estimates.png", title=f"{spec.name} · {model.variant}")
+        (out / "estimates.json").write_text(json.dumps(report, indent=1))
+        show.print(f"estimates plot → {out / 'estimates.png'}")
+        if strip:
+            save_push_strip(
+                result.records[0], model.camera, out / "push-1.png", title=f"{spec.name}, push 1"
+            )
+            show.print(f"frame strip → {out / 'push-1.png'}")
+    if as_json:
+        print(json.dumps(report))
+    return report
+
+
+@app.command()
+def infer(
+    model: str = typer.Option("pretrained", "--model", help="RUN directory or 'pretrained'"),
+    obj: str = typer.Option(..., "--object", help="catalogue:ID, a JSON/YAML file or JSON"),
+    pushes: int = typer.Option(5, "--pushes", min=1),
+    policy: str = typer.Option(
+        "uniform", "--policy", help="uniform | random | active-kl | active-entropy"
+    ),
+    seed: int = typer.Option(0, "--seed"),
+    out: Path = typer.Option(Path("infer-out"), "--out", help="where the plot and JSON go"),
+    as_json: bool = typer.Option(False, "--json", help="print the estimates as JSON"),
+    sigma_points: int = typer.Option(None, "--sigma-points", help="default: the model's (100)"),
+):
+    """Push an object K times on the testbed and estimate its parameters after every push."""
+    run_inference(model, obj, pushes, policy, seed, out, as_json, sigma_points=sigma_points)
+
+
+@app.command()
 def demo(
     out: Path = typer.Option(Path("demo-out"), "--out"),
     seed: int = typer.Option(0, "--seed"),
+    model: str = typer.Option("pretrained", "--model"),
+    pushes: int = typer.Option(5, "--pushes", min=1),
 ):
-    """Offline demo. Until the pretrained estimator ships, it simulates a constant-speed and a
-    release push on a held-out object and shows what the robot sees and feels."""
-    from pushtoknow.testbed.objects import load_object_spec
-    from pushtoknow.viz import one_push, save_push_strip
+    """Offline demo: the shipped model estimates a held-out catalogue object (never trained
+    on) from 5 pushes; prints the tables, writes the plot and a strip of rendered frames."""
+    from pushtoknow.testbed.objects import demo_object_id
 
-    out.mkdir(parents=True, exist_ok=True)
-    spec = load_object_spec("catalogue:412")
-    for profile in ("constant", "release"):
-        rec, camera = one_push(spec, profile, seed)
-        path = out / f"push-{profile}.png"
-        save_push_strip(rec, camera, path, title=f"{spec.name} ({profile})")
-        _print_push_summary(spec, _push_summary(spec, rec))
-        console.print(f"frame strip → {path}")
+    run_inference(
+        model, f"catalogue:{demo_object_id()}", pushes, "uniform", seed, out, False, strip=True
+    )
 
 
 def main() -> None:  # pragma: no cover

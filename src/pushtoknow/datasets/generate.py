@@ -30,6 +30,7 @@ from pushtoknow.testbed.executor import SimulatedExecutor
 from pushtoknow.testbed.objects import (
     ObjectSpec,
     build_catalogue,
+    catalogue_split,
     load_object_spec,
     sample_continuous_object,
 )
@@ -42,7 +43,10 @@ class GenerationConfig(Config):
     objects: int = Field(4, gt=0)
     pushes: int = Field(2, gt=0)
     seed: int = 0
-    objects_from: str = Field("catalogue", description="catalogue | continuous | FILE")
+    objects_from: str = Field(
+        "catalogue",
+        description="catalogue | catalogue-train | catalogue-test | continuous | FILE",
+    )
     profiles: tuple[Literal["constant", "release"], ...] = ("constant",)
     objects_per_shard: int = Field(4, gt=0)
     sim: SimConfig = SimConfig()
@@ -57,12 +61,15 @@ class GenerationConfig(Config):
 
 def select_objects(objects_from: str, n: int, seed: int) -> list[ObjectSpec]:
     """The n objects of a dataset, deterministic in (objects_from, n, seed)."""
-    if objects_from == "catalogue":
+    if objects_from in ("catalogue", "catalogue-train", "catalogue-test"):
         cat = build_catalogue().objects
-        if n > len(cat):
-            raise ValueError(f"--objects {n} exceeds the catalogue's {len(cat)} objects")
-        order = np.random.default_rng(seed).permutation(len(cat))
-        return [cat[i] for i in order[:n]]
+        train, test = catalogue_split()
+        pool = {"catalogue": range(len(cat)), "catalogue-train": train, "catalogue-test": test}
+        ids = list(pool[objects_from])
+        if n > len(ids):
+            raise ValueError(f"--objects {n} exceeds the {len(ids)} objects of {objects_from}")
+        order = np.random.default_rng(seed).permutation(len(ids))
+        return [cat[ids[i]] for i in order[:n]]
     if objects_from == "continuous":
         return [sample_continuous_object(np.random.default_rng([seed, 1, i])) for i in range(n)]
     path = Path(objects_from)

@@ -340,6 +340,24 @@ class LearnedObservationNoise(ObservationNoiseModel):
         return self.net(rel)
 
 
+class ScaledObservationNoise(ObservationNoiseModel):
+    """R = scale · R_base(z): the observation noise of a trained model inflated by a factor
+    calibrated on validation data. 100 updates per push treat model errors that persist over
+    the push as independent; inflating R (`training.pipeline` calibrates it) keeps the
+    parameter belief from becoming overconfident."""
+
+    def __init__(self, base: ObservationNoiseModel, scale: float):
+        super().__init__()
+        if not scale > 0:
+            raise ValueError(f"noise scale must be positive, got {scale}")
+        self.base = base
+        self.scale = float(scale)
+        self.obs_dim = base.obs_dim
+
+    def forward(self, observation: torch.Tensor, context: PushContext) -> torch.Tensor:
+        return self.scale * self.base(observation, context)
+
+
 # --------------------------------------------------------------------------------------------
 class LearnedModelsConfig(Config):
     """Sizes of the learned models; the defaults are the paper-sized networks for 64 px images

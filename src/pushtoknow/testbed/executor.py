@@ -23,11 +23,15 @@ from pushtoknow.testbed.sim import PushRecord, PushSimulator
 
 @dataclass(frozen=True)
 class View:
-    """What the camera shows before a push: RGB (H, W, 3) uint8, depth (H, W) m, S_0 (H, W)."""
+    """What the camera shows before a push: RGB (H, W, 3) uint8, depth (H, W) m, S_0 (H, W).
+
+    moved_by: (dx, dy) m by which the executor translated the object since the end of the
+    previous push (re-centring), None if it did not or does not know."""
 
     rgb: np.ndarray
     depth: np.ndarray
     s0: np.ndarray
+    moved_by: tuple[float, float] | None = None
 
 
 class PushExecutor(ABC):
@@ -47,7 +51,10 @@ class SimulatedExecutor(PushExecutor):
 
     Before each push the object is placed at rest at a random pose (x, y uniform within
     ±`workspace_half_extent`, θ uniform): like a robot that re-centres the object so every
-    push stays in view. Deterministic given `seed`.
+    push stays in view. With `recentre` (inference on one object), only the first placement
+    is random; afterwards the object keeps the orientation the push left it in and is
+    translated back to its first position (`View.moved_by` reports the translation), like a
+    robot sliding it back into view. Deterministic given `seed`.
     """
 
     def __init__(
@@ -56,12 +63,18 @@ class SimulatedExecutor(PushExecutor):
         config: SimConfig | None = None,
         seed: int = 0,
         randomise_pose: bool = True,
+        recentre: bool = False,
     ):
         self.sim = PushSimulator(spec, config)
         self.camera = self.sim.camera
         self.rng = np.random.default_rng(seed)
         self.randomise_pose = randomise_pose
+        self.recentre = recentre
         self._placed = False
+        self._first_pose: np.ndarray | None = None
+        self._last_pose: np.ndarray | None = None
+        self._moved_by: tuple[float, float] | None = None
+        self.initial_pose: np.ndarray | None = None  # the true pose at the first placement
 
     @property
     def spec(self) -> ObjectSpec:
@@ -69,7 +82,13 @@ class SimulatedExecutor(PushExecutor):
 
     def place(self) -> np.ndarray:
         h = self.sim.config.workspace_half_extent
-        if self.randomise_pose:
+        self._moved_by = None
+        if self.recentre and self._last_pose is not None:
+            x0, y0 = self._first_pose[:2]
+            x, y, th = self._last_pose
+            self._moved_by = (float(x0 - x), float(y0 - y))
+            pose = (x0, y0, th)
+        elif self.randomise_pose:
             pose = (
                 self.rng.uniform(-h, h),
                 self.rng.uniform(-h, h),
@@ -78,17 +97,22 @@ class SimulatedExecutor(PushExecutor):
         else:
             pose = (0.0, 0.0, 0.0)
         self._placed = True
-        return self.sim.reset(pose)
+        placed = self.sim.reset(pose)
+        if self._first_pose is None:
+            self._first_pose = placed
+            self.initial_pose = placed.copy()
+        return placed
 
     def observe(self) -> View:
         if not self._placed:
             self.place()
-        return View(*self.sim.observe())
+        return View(*self.sim.observe(), moved_by=self._moved_by)
 
     def execute(self, push: Push) -> PushRecord:
         if not self._placed:
             self.place()
         rec = self.sim.execute(push, self.rng)
+        self._last_pose = np.asarray(rec.pose[-1], dtype=float)
         self._placed = False  # the next observe/execute places the object afresh
         return rec
 

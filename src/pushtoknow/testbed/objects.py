@@ -214,6 +214,38 @@ def build_catalogue(seed: int = CATALOGUE_SEED, per_shape: int = CATALOGUE_PER_S
     return Catalogue(tuple(objects), rejected, seed)
 
 
+CATALOGUE_TEST_PER_SHAPE = 8  # held-out objects per shape (≈ 10%; 88 of 825)
+
+
+@lru_cache(maxsize=1)
+def catalogue_split() -> tuple[tuple[int, ...], tuple[int, ...]]:
+    """The fixed train/test split of the catalogue by object: (train IDs, test IDs), stratified
+    by shape (`CATALOGUE_TEST_PER_SHAPE` test objects of each shape), seeded. Training data come
+    from the train IDs, accuracy is measured on the test IDs, and the demo uses a test object."""
+    cat = build_catalogue()
+    rng = np.random.default_rng(CATALOGUE_SEED + 1)
+    test: list[int] = []
+    for shape_name in CATALOGUE_SHAPES:
+        ids = [i for i, o in enumerate(cat.objects) if o.shape == shape_name]
+        test += sorted(rng.choice(ids, CATALOGUE_TEST_PER_SHAPE, replace=False).tolist())
+    test_set = set(test)
+    train = tuple(i for i in range(len(cat.objects)) if i not in test_set)
+    return train, tuple(sorted(test))
+
+
+DEMO_SHAPE = "rect2"
+
+
+def demo_object_id() -> int:
+    """The demo's object: the held-out (`catalogue_split` test) `DEMO_SHAPE` object whose CoM
+    lies farthest from the centre, so that its pushes rotate it visibly."""
+    cat = build_catalogue()
+    test = [i for i in catalogue_split()[1] if cat.objects[i].shape == DEMO_SHAPE]
+    return max(
+        test, key=lambda i: math.hypot(cat.objects[i].params.com_x, cat.objects[i].params.com_y)
+    )
+
+
 def catalogue_object(idx: int) -> ObjectSpec:
     cat = build_catalogue()
     if not 0 <= idx < len(cat.objects):

@@ -8,6 +8,8 @@ from typing import Literal
 
 import numpy as np
 
+from pushtoknow.testbed.config import PadConfig, PushConfig
+
 ProfileName = Literal["constant", "release"]
 PROFILES: tuple[str, ...] = ("constant", "release")
 
@@ -79,3 +81,43 @@ class Push:
     def from_array(cls, a) -> Push:
         a = np.asarray(a, dtype=np.float64)
         return cls((float(a[0]), float(a[1])), float(a[2]), PROFILES[int(a[4])], float(a[3]))
+
+
+def pad_positions(
+    push: Push,
+    times: np.ndarray,
+    cfg: PushConfig,
+    start: np.ndarray | None = None,
+    pad_radius: float | None = None,
+) -> np.ndarray:
+    """Commanded pad centre (T, 2) (m, world) at `times` (T,) (s since the push began).
+
+    Exactly how `PushSimulator.execute` drives the pad: p(t) = start + d(t) · pd, d the distance
+    travelled under the push's speed profile (constant at `push.speed` over `cfg.horizon`, or
+    the release profile with `cfg.release_accel` / `cfg.release_decel`). A record's
+    `pusher[k]` is p(k / rate) up to one physics step of integration error.
+
+    start (2,): the pad's start. The simulator finds it on the true geometry
+    (`PushSimulator.pad_start`: the first point on the push line at the wanted gap from the
+    object); pass that (or a record's `pusher[0]`) to reproduce a push exactly. None gives the
+    nominal start cp − pd · (pad_radius + gap), gap = max(cfg.approach_gap, clearance) for a
+    constant push and the simulator's clearance for a release push: exact when cp lies on the
+    object's boundary and pd is the inward normal there (or the line misses the object).
+    pad_radius: m, default `PadConfig().radius`.
+    """
+    from pushtoknow.testbed.sim import PAD_CLEARANCE  # lazy: the simulator imports MuJoCo
+
+    if push.profile == "constant":
+        profile = constant_profile(push.speed, cfg.horizon)
+    elif push.profile == "release":
+        profile = release_profile(push.speed, cfg.release_accel, cfg.release_decel, cfg.horizon)
+    else:
+        raise ValueError(f"unknown speed profile {push.profile!r}; use 'constant' or 'release'")
+    u = push.unit
+    if start is None:
+        radius = PadConfig().radius if pad_radius is None else pad_radius
+        gap = cfg.approach_gap if push.profile == "constant" else PAD_CLEARANCE
+        start = np.asarray(push.contact, dtype=np.float64) - u * (radius + max(gap, PAD_CLEARANCE))
+    start = np.asarray(start, dtype=np.float64).reshape(2)
+    t = np.asarray(times, dtype=np.float64).reshape(-1)
+    return start[None] + np.outer(np.atleast_1d(profile.distance(t)), u)

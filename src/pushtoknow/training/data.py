@@ -153,6 +153,21 @@ def load_push_tensors(root: Path, max_objects: int | None = None) -> PushTensors
     )
 
 
+def iter_push_groups(root: Path, max_objects: int | None = None):
+    """The HDF5 push groups of a dataset, in the order of `load_push_tensors` (shards sorted,
+    objects and pushes by index)."""
+    n_obj = 0
+    for s in list_shards(root):
+        with open_shard(s) as f:
+            for okey in sorted(f["objects"], key=int):
+                if max_objects is not None and n_obj >= max_objects:
+                    return
+                n_obj += 1
+                pushes = f["objects"][okey]["pushes"]
+                for pk in sorted(pushes, key=int):
+                    yield pushes[pk]
+
+
 def load_frames(root: Path, every: int = 5, max_objects: int | None = None):
     """Image frames for VisNet: every `every`-th frame of each push.
 
@@ -163,25 +178,37 @@ def load_frames(root: Path, every: int = 5, max_objects: int | None = None):
 
     rgbd, mask0, pose, pose0, pid = [], [], [], [], []
     camera, _ = dataset_camera(root)
-    n_obj = push = 0
-    for s in list_shards(root):
-        with open_shard(s) as f:
-            for okey in sorted(f["objects"], key=int):
-                if max_objects is not None and n_obj >= max_objects:
-                    break
-                n_obj += 1
-                for pk in sorted(f["objects"][okey]["pushes"], key=int):
-                    p = f["objects"][okey]["pushes"][pk]
-                    ps = p["pose"][()]
-                    idx = np.arange(0, len(ps), every)
-                    rgbd.append(
-                        frames_as_tensors(p["rgb"][()][idx], p["depth"][()][idx], camera).numpy()
-                    )
-                    s0 = p["s0"][()].astype(np.float32)
-                    mask0.append(np.repeat(s0[None, None], len(idx), 0))
-                    pose.append(ps[idx])
-                    pose0.append(np.repeat(ps[:1], len(idx), 0))
-                    pid += [push] * len(idx)
-                    push += 1
+    for push, p in enumerate(iter_push_groups(root, max_objects)):
+        ps = p["pose"][()]
+        idx = np.arange(0, len(ps), every)
+        rgbd.append(frames_as_tensors(p["rgb"][()][idx], p["depth"][()][idx], camera).numpy())
+        s0 = p["s0"][()].astype(np.float32)
+        mask0.append(np.repeat(s0[None, None], len(idx), 0))
+        pose.append(ps[idx])
+        pose0.append(np.repeat(ps[:1], len(idx), 0))
+        pid += [push] * len(idx)
     t = lambda xs: torch.as_tensor(np.concatenate(xs), dtype=torch.float32)  # noqa: E731
     return t(rgbd), t(mask0), t(pose), t(pose0), torch.as_tensor(pid)
+
+
+def compute_vision_poses(
+    root: Path, measure, max_objects: int | None = None, progress=None
+) -> torch.Tensor:
+    """VisNet poses (N, T, 3) of every frame of every push, in `load_push_tensors` order.
+
+    measure(rgbd (T, 4, H, W), mask0 (T, 1, H, W), pose (T, 3) true, pose0 (T, 3)) → (T, 3):
+    the caller's VisNet measurement (its reference pose derived from the truth, e.g. perturbed).
+    """
+    from pushtoknow.training.visnet import frames_as_tensors
+
+    camera, _ = dataset_camera(root)
+    out = []
+    for p in iter_push_groups(root, max_objects):
+        pose = torch.as_tensor(p["pose"][()], dtype=torch.float32)
+        rgbd = frames_as_tensors(p["rgb"][()], p["depth"][()], camera)
+        s0 = torch.as_tensor(p["s0"][()], dtype=torch.float32)[None, None]
+        n = len(pose)
+        out.append(measure(rgbd, s0.expand(n, -1, -1, -1), pose, pose[:1].expand(n, -1)))
+        if progress is not None:
+            progress()
+    return torch.stack(out)

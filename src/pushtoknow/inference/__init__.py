@@ -1,0 +1,19 @@
+"""Inference on a novel object with a trained model (SPEC §3.7)."""
+
+from pushtoknow.inference.session import (
+    POLICIES,
+    InferenceConfig,
+    InferenceResult,
+    ObjectEstimator,
+    PushEstimate,
+    infer_object,
+)
+
+__all__ = [
+    "POLICIES",
+    "InferenceConfig",
+    "InferenceResult",
+    "ObjectEstimator",
+    "PushEstimate",
+    "infer_object",
+]

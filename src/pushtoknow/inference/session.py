@@ -1,0 +1,351 @@
+"""Inference on a novel object (SPEC §3.7): K pushes, the parameter posterior carried over.
+
+Per push k:
+1. The executor shows the object at rest: S_0 and the first RGB-D frame.
+2. The pose at the push's start, pose0: for the first push the object frame is *defined* by
+   the given initial pose (in simulation the true pose: CoM and inertia are reported in the
+   object's geometric frame, so the frame must match the truth's); without one, the frame is
+   S_0's centroid with θ = 0. For later pushes VisNet measures it, comparing the new image
+   with the previous push's S_0 at a reference pose = the previous posterior pose moved by
+   the executor's re-centring translation.
+3. The policy picks a push among affordances of S_0; the executor runs it.
+4. The filter runs over the push at 10 Hz: the belief starts at N(pose0, diag(init std²)) ×
+   the parameter posterior of the previous push (the catalogue prior before the first);
+   VisNet's reference pose at each frame is the filter's predicted mean; z = (VisNet pose,
+   measured force) (V-DDF: pose only); the update runs every `update_every` samples.
+5. The parameter marginal is the estimate; it becomes the next push's prior.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+import torch
+from pydantic import Field
+
+from pushtoknow.active.policies import ActivePolicy
+from pushtoknow.common.camera import CameraModel
+from pushtoknow.common.config import Config
+from pushtoknow.common.params import PARAM_NAMES, PARAM_RANGES, denormalise_params
+from pushtoknow.geometry.affordances import mask_contour, sample_push_affordances
+from pushtoknow.models.checkpoint import TrainedModel
+from pushtoknow.models.learned import PushContext
+from pushtoknow.testbed.config import SimConfig
+from pushtoknow.testbed.executor import PushExecutor, View
+from pushtoknow.testbed.push import Push, pad_positions
+from pushtoknow.testbed.sim import PushRecord
+from pushtoknow.training.data import footprint_from_mask
+from pushtoknow.training.visnet import frames_as_tensors, visnet_measure
+
+Policy = Literal["uniform", "random", "active-kl", "active-entropy"]
+POLICIES: tuple[str, ...] = ("uniform", "random", "active-kl", "active-entropy")
+
+
+class InferenceConfig(Config):
+    pushes: int = Field(5, ge=1)
+    policy: Policy = "uniform"
+    candidates: int = Field(16, ge=1, description="affordances sampled per push decision")
+    num_sigma_points: int | None = Field(None, ge=10, description="None: the model's")
+    init_pose_std: tuple[float, float, float] = Field(
+        (0.002, 0.002, 0.03), description="pose std at a push's start (m, m, rad)"
+    )
+    active_horizon_fraction: float = Field(0.5, gt=0, le=1)
+
+
+@dataclass
+class PushEstimate:
+    """The parameter belief after push `index` (1-based; 0 = the prior). mean/std in SI
+    (PARAM_NAMES order); mean_norm (K,), cov_norm (K, K) in normalised units."""
+
+    index: int
+    mean: np.ndarray
+    std: np.ndarray
+    mean_norm: np.ndarray
+    cov_norm: np.ndarray
+    push: Push | None = None
+
+    def as_dict(self) -> dict:
+        return {
+            n: {"mean": float(m), "std": float(s)}
+            for n, m, s in zip(PARAM_NAMES, self.mean, self.std, strict=True)
+        }
+
+
+@dataclass
+class InferenceResult:
+    """prior: the belief before any push; estimates: one per push; truth: SI (K,) or None;
+    records: the executed pushes; poses: the filtered pose means (T, 3) of each push."""
+
+    prior: PushEstimate
+    estimates: list[PushEstimate]
+    truth: np.ndarray | None
+    records: list[PushRecord] = field(default_factory=list)
+    poses: list[np.ndarray] = field(default_factory=list)
+    object_name: str = ""
+
+    def to_json(self) -> dict:
+        out: dict = {
+            "object": self.object_name,
+            "prior": {"estimate": self.prior.as_dict()},
+            "pushes": [
+                {
+                    "estimate": e.as_dict(),
+                    "push": None if e.push is None else _push_dict(e.push),
+                }
+                for e in self.estimates
+            ],
+            "truth": None
+            if self.truth is None
+            else {n: float(v) for n, v in zip(PARAM_NAMES, self.truth, strict=True)},
+        }
+        return out
+
+
+def _push_dict(p: Push) -> dict:
+    return {
+        "contact": [float(c) for c in p.contact],
+        "direction": float(p.direction),
+        "profile": p.profile,
+        "speed": float(p.speed),
+    }
+
+
+def _si_scale() -> np.ndarray:
+    """d(SI)/d(normalised) per parameter (the normalisation is affine)."""
+    return np.array([(PARAM_RANGES[n][1] - PARAM_RANGES[n][0]) / 2 for n in PARAM_NAMES])
+
+
+def belief_to_estimate(index: int, mean: torch.Tensor, cov: torch.Tensor, push=None):
+    """Normalised parameter belief (K,), (K, K) → `PushEstimate` in SI."""
+    m = mean.detach().double()
+    c = cov.detach().double()
+    si = denormalise_params(m).numpy()
+    std = np.sqrt(np.clip(torch.diagonal(c).numpy(), 0, None)) * _si_scale()
+    return PushEstimate(index, si, std, m.numpy(), c.numpy(), push)
+
+
+def choose_push(
+    policy: Policy,
+    view: View,
+    camera: CameraModel,
+    k: int,
+    pushes: int,
+    pose0: np.ndarray,
+    rng: np.random.Generator,
+    speed: float,
+    candidates: int,
+    active=None,
+) -> Push:
+    """The k-th push (0-based) of `pushes` by `policy` among `candidates` affordances of S_0.
+
+    uniform: contact points spread evenly around the object — the candidate whose bearing
+    from the centroid, in the object frame, is nearest to 2πk/K (a seeded offset); random:
+    one random affordance; active-*: `active(list[Push]) → index`."""
+    cp, pd = sample_push_affordances(view.s0, camera, candidates, rng)
+    cands = [Push(tuple(cp[i]), float(pd[i]), "constant", speed) for i in range(len(pd))]
+    if policy == "random":
+        return cands[0]
+    if policy == "uniform":
+        centre = mask_contour(view.s0, camera).centroid
+        bearing = np.arctan2(cp[:, 1] - centre[1], cp[:, 0] - centre[0]) - pose0[2]
+        target = 2 * math.pi * k / pushes + rng.uniform(0, 2 * math.pi / pushes)
+        diff = np.abs(np.angle(np.exp(1j * (bearing - target))))
+        return cands[int(np.argmin(diff))]
+    if active is None:
+        raise ValueError(f"policy {policy!r} needs an active-selection scorer")
+    return cands[int(active(cands))]
+
+
+class ObjectEstimator:
+    """Runs the trained filter on pushes of one object; see the module docstring."""
+
+    def __init__(self, model: TrainedModel, config: InferenceConfig = InferenceConfig(), seed=0):
+        self.model = model.eval()
+        self.config = config
+        self.filter = model.build_filter(config.num_sigma_points)
+        self.filter.eval()
+        self.camera = model.camera
+        self.gen = torch.Generator().manual_seed(seed)
+        self.rng = np.random.default_rng(seed)
+        self.num_sigma_points = config.num_sigma_points or model.inference.num_sigma_points
+        self.param_mean = model.prior.mean.clone()
+        self.param_cov = model.prior.cov.clone()
+        self._prev: tuple[np.ndarray, np.ndarray] | None = None  # (S_0, pose0) of last push
+        self._last_pose: np.ndarray | None = None
+
+    def start_belief(self, pose0: np.ndarray) -> tuple[torch.Tensor, torch.Tensor]:
+        """Belief (mean (1, D), cov (1, D, D)) at a push's start: N(pose0, init std²) × the
+        current parameter belief."""
+        k_dim = self.param_mean.shape[0]
+        mean = torch.cat([torch.as_tensor(pose0, dtype=torch.float32), self.param_mean])[None]
+        cov = torch.zeros(1, 3 + k_dim, 3 + k_dim)
+        cov[0, :3, :3] = torch.diag(torch.tensor(self.config.init_pose_std).square())
+        cov[0, 3:, 3:] = self.param_cov
+        return mean, cov
+
+    def context(
+        self,
+        s0: np.ndarray,
+        pose0: np.ndarray,
+        pad_xy: torch.Tensor,
+        pushes: list[Push],
+    ) -> PushContext:
+        """PushContext for len(pushes) pushes of the object seen in s0 at pose0, pads at
+        pad_xy (B, 2)."""
+        b = len(pushes)
+        mask0 = torch.as_tensor(s0, dtype=torch.float32)[None, None].expand(b, -1, -1, -1)
+        fp = torch.as_tensor(footprint_from_mask(s0, self.camera, pose0), dtype=torch.float32)
+        return PushContext(
+            mask0=mask0,
+            pose0=torch.as_tensor(pose0, dtype=torch.float32)[None].expand(b, -1),
+            contact_xy=pad_xy.float(),
+            direction=torch.tensor([p.direction for p in pushes], dtype=torch.float32),
+            speed=torch.tensor([p.speed for p in pushes], dtype=torch.float32),
+            camera=self.camera,
+            footprint=fp[None].expand(b, -1, -1),
+        )
+
+    def estimate(self, index: int, push: Push | None = None) -> PushEstimate:
+        return belief_to_estimate(index, self.param_mean, self.param_cov, push)
+
+    @torch.no_grad()
+    def start_pose(self, view: View, initial_pose: np.ndarray | None) -> np.ndarray:
+        """pose0 of the next push (see module docstring, step 2)."""
+        if self._prev is None:
+            if initial_pose is not None:
+                return np.asarray(initial_pose, dtype=float)
+            c = mask_contour(view.s0, self.camera).centroid
+            return np.array([c[0], c[1], 0.0])
+        s0_prev, pose0_prev = self._prev
+        ref = self._last_pose.copy()
+        if view.moved_by is not None:
+            ref[:2] += np.asarray(view.moved_by)
+        rgbd = frames_as_tensors(view.rgb[None], view.depth[None], self.camera)
+        meas = visnet_measure(
+            self.model.visnet,
+            rgbd,
+            torch.as_tensor(s0_prev, dtype=torch.float32)[None, None],
+            torch.as_tensor(pose0_prev, dtype=torch.float32)[None],
+            torch.as_tensor(ref, dtype=torch.float32)[None],
+            self.camera,
+        )
+        return meas[0].double().numpy()
+
+    @torch.no_grad()
+    def filter_push(self, rec: PushRecord, s0: np.ndarray, pose0: np.ndarray) -> np.ndarray:
+        """Run the filter over one executed push; updates the parameter belief. Returns the
+        filtered pose means (T, 3)."""
+        filt, cam = self.filter, self.camera
+        p0 = torch.as_tensor(pose0, dtype=torch.float32)
+        mean, cov = self.start_belief(pose0)
+        mask0 = torch.as_tensor(s0, dtype=torch.float32)[None, None]
+        base = self.context(s0, pose0, torch.zeros(1, 2), [rec.push])
+        frames = frames_as_tensors(rec.rgb, rec.depth, cam)
+        pusher = torch.as_tensor(rec.pusher, dtype=torch.float32)
+        tactile = torch.as_tensor(rec.tactile, dtype=torch.float32)
+        every = self.model.inference.update_every
+        steps = len(rec.time) - 1
+        poses = [mean[0, :3].numpy().copy()]
+        for t in range(1, steps + 1):
+            ctx = dataclasses.replace(base, contact_xy=pusher[t][None])
+            noise = filt.draw_noise(1, self.gen, num_sigma_points=self.num_sigma_points)
+            mean, cov = filt.predict(mean, cov, ctx, noise)
+            if t % every == 0 or t == steps:
+                z_pose = visnet_measure(
+                    self.model.visnet, frames[t : t + 1], mask0, p0[None], mean[:, :3], cam
+                )
+                z = (
+                    z_pose
+                    if self.model.vision_only
+                    else torch.cat([z_pose, tactile[t : t + 1, :2]], -1)
+                )
+                mean, cov, _ = filt.update(mean, cov, z, ctx, noise)
+            poses.append(mean[0, :3].numpy().copy())
+        self.param_mean = mean[0, 3:].clone()
+        self.param_cov = cov[0, 3:, 3:].clone()
+        self._prev = (s0, pose0)
+        self._last_pose = mean[0, :3].double().numpy()
+        return np.stack(poses)
+
+
+def active_scorer(policy: Policy, sim_config: SimConfig, horizon_fraction: float = 0.5):
+    """The active scorer of `infer_object` for policy "active-kl" or "active-entropy":
+    SPEC §3.5 rollouts of the estimator's filter over the candidates' commanded pad paths
+    (`testbed.push.pad_positions`), all candidates in one batch."""
+    score = {"active-kl": "kl", "active-entropy": "entropy"}[policy]
+    push_config = sim_config.push
+    dt = 1.0 / sim_config.tactile.rate_hz
+    steps = int(round(push_config.horizon * sim_config.tactile.rate_hz))
+
+    def for_push(est: ObjectEstimator, view: View, pose0: np.ndarray):
+        policy_ = ActivePolicy(est.filter, steps, score, horizon_fraction, est.num_sigma_points)
+        mean, cov = est.start_belief(pose0)
+
+        def choose(cands: list[Push]) -> int:
+            times = np.arange(steps + 1) * dt
+            paths = torch.as_tensor(
+                np.stack([pad_positions(p, times, push_config) for p in cands]),
+                dtype=torch.float32,
+            )  # (M, T, 2)
+            base = est.context(view.s0, pose0, paths[:, 0], cands)
+
+            def builder(_: list[Push], step: int) -> PushContext:
+                return dataclasses.replace(base, contact_xy=paths[:, step + 1])
+
+            return policy_.choose(cands, mean, cov, builder, est.gen)
+
+        return choose
+
+    return for_push
+
+
+def infer_object(
+    model: TrainedModel,
+    executor: PushExecutor,
+    config: InferenceConfig = InferenceConfig(),
+    seed: int = 0,
+    initial_pose: np.ndarray | None = None,
+    truth: np.ndarray | None = None,
+    object_name: str = "",
+    on_push=None,
+    active_scorer=None,
+) -> InferenceResult:
+    """K pushes on the executor's object with `model`; `on_push(estimate)` after each push.
+
+    active_scorer(estimator, view, pose0) → callable(list[Push]) → index, for active
+    policies."""
+    est = ObjectEstimator(model, config, seed)
+    speed = float(model.info.get("push_speed", 0.02))
+    result = InferenceResult(est.estimate(0), [], truth, object_name=object_name)
+    for k in range(config.pushes):
+        view = executor.observe()
+        pose0 = est.start_pose(view, initial_pose)
+        active = None
+        if config.policy.startswith("active"):
+            if active_scorer is None:
+                raise ValueError(f"policy {config.policy!r} needs active selection")
+            active = active_scorer(est, view, pose0)
+        push = choose_push(
+            config.policy,
+            view,
+            est.camera,
+            k,
+            config.pushes,
+            pose0,
+            est.rng,
+            speed,
+            config.candidates,
+            active,
+        )
+        rec = executor.execute(push)
+        result.poses.append(est.filter_push(rec, view.s0, pose0))
+        result.records.append(rec)
+        e = est.estimate(k + 1, push)
+        result.estimates.append(e)
+        if on_push is not None:
+            on_push(e)
+    return result

@@ -1,0 +1,232 @@
+"""A trained model: the filter's networks, VisNet, their configs and the parameter prior, saved as
+one checkpoint file (`model.pt`) that names the versions and configs it was written with.
+
+Loading checks the file's format and format version, rebuilds the networks from the stored
+configs and loads the weights strictly; any mismatch is a `CheckpointError` naming the problem.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Literal
+
+import torch
+from pydantic import Field
+
+import pushtoknow
+from pushtoknow.common.camera import CameraModel
+from pushtoknow.common.config import Config
+from pushtoknow.common.errors import CheckpointError
+from pushtoknow.filters.base import BeliefFilter, FilterConfig
+from pushtoknow.filters.gaussian import symmetrize
+from pushtoknow.models.learned import (
+    LearnedModels,
+    LearnedModelsConfig,
+    ScaledObservationNoise,
+    build_filter,
+    build_learned_models,
+)
+from pushtoknow.models.networks import VisNet, VisNetConfig
+
+CHECKPOINT_FORMAT = "pushtoknow-checkpoint"
+CHECKPOINT_VERSION = 1
+CHECKPOINT_FILE = "model.pt"
+
+Variant = Literal["vt-addf", "vt-jdf", "v-ddf"]
+FILTER_KIND = {"vt-addf": "dual", "vt-jdf": "joint", "v-ddf": "vision_only"}
+
+
+@dataclass(frozen=True)
+class ParamPrior:
+    """Gaussian prior over the normalised parameters: mean (K,), cov (K, K)."""
+
+    mean: torch.Tensor
+    cov: torch.Tensor
+
+    @classmethod
+    def from_params(cls, params_norm: torch.Tensor, object_index: torch.Tensor) -> ParamPrior:
+        """Moments over the objects (each counted once) of a training set; params_norm (N, K),
+        object_index (N,) one row per push."""
+        _, first = _first_rows(object_index)
+        per_object = params_norm[first].double()
+        mean = per_object.mean(0)
+        dev = per_object - mean
+        cov = dev.T @ dev / max(len(per_object) - 1, 1)
+        return cls(mean.float(), symmetrize(cov).float())
+
+    def to_dict(self) -> dict:
+        return {"mean": self.mean.tolist(), "cov": self.cov.tolist()}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> ParamPrior:
+        return cls(torch.tensor(d["mean"]), torch.tensor(d["cov"]))
+
+
+def _first_rows(index: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """(unique values, the first row holding each)."""
+    uniq, inverse = torch.unique(index, return_inverse=True)
+    first = torch.full((len(uniq),), len(index), dtype=torch.long)
+    first = first.scatter_reduce(0, inverse, torch.arange(len(index)), reduce="amin")
+    return uniq, first
+
+
+class InferenceSettings(Config):
+    """How the trained filter runs at inference (calibrated on validation pushes after
+    training). update_every: apply the measurement update at every n-th 10 Hz sample only
+    (prediction runs at every sample); noise_scale: factor on the learned R."""
+
+    update_every: int = Field(1, ge=1)
+    noise_scale: float = Field(1.0, gt=0)
+    num_sigma_points: int = Field(100, ge=10)
+
+
+@dataclass
+class TrainedModel:
+    """Everything inference needs. camera: the camera of the training images; push_speed:
+    the constant push speed of the training data (m/s); info: provenance (data seed, training
+    config, validation numbers), free-form JSON."""
+
+    variant: Variant
+    models_config: LearnedModelsConfig
+    filter_config: FilterConfig
+    models: LearnedModels
+    visnet: VisNet
+    prior: ParamPrior
+    camera: CameraModel
+    info: dict = field(default_factory=dict)
+    inference: InferenceSettings = field(default_factory=InferenceSettings)
+
+    @property
+    def vision_only(self) -> bool:
+        return self.variant == "v-ddf"
+
+    def build_filter(
+        self, num_sigma_points: int | None = None, noise_scale: float | None = None
+    ) -> BeliefFilter:
+        """The variant's filter on these networks, R scaled by `noise_scale` (default: the
+        calibrated `inference.noise_scale`), with `num_sigma_points` (default: inference's)."""
+        c = num_sigma_points or self.inference.num_sigma_points
+        cfg = self.filter_config.model_copy(update={"num_sigma_points": c})
+        scale = self.inference.noise_scale if noise_scale is None else noise_scale
+        m = self.models
+        noise = ScaledObservationNoise(m.observation_noise, scale)
+        models = LearnedModels(m.dynamics, m.observation, noise)
+        return build_filter(FILTER_KIND[self.variant], models, filter_config=cfg)
+
+    def eval(self) -> TrainedModel:
+        self.models.modules().eval()
+        self.visnet.eval()
+        return self
+
+
+def new_model(
+    variant: Variant,
+    models_config: LearnedModelsConfig,
+    filter_config: FilterConfig,
+    visnet: VisNet,
+    prior: ParamPrior,
+    camera: CameraModel,
+    info: dict | None = None,
+) -> TrainedModel:
+    if variant not in FILTER_KIND:
+        raise CheckpointError(f"unknown variant {variant!r}; expected one of {list(FILTER_KIND)}")
+    models = build_learned_models(models_config, vision_only=(variant == "v-ddf"))
+    return TrainedModel(
+        variant, models_config, filter_config, models, visnet, prior, camera, dict(info or {})
+    )
+
+
+def _camera_dict(camera: CameraModel) -> dict:
+    return {k: getattr(camera, k) for k in camera.__dataclass_fields__}
+
+
+def save_checkpoint(model: TrainedModel, path: Path) -> Path:
+    """Write `model` to path (a directory gets `model.pt`), atomically (temp file + rename)."""
+    path = Path(path)
+    if path.is_dir() or path.suffix == "":
+        path.mkdir(parents=True, exist_ok=True)
+        path = path / CHECKPOINT_FILE
+    payload = {
+        "format": CHECKPOINT_FORMAT,
+        "format_version": CHECKPOINT_VERSION,
+        "pushtoknow_version": pushtoknow.__version__,
+        "torch_version": str(torch.__version__),
+        "variant": model.variant,
+        "models_config": model.models_config.model_dump(mode="json"),
+        "filter_config": model.filter_config.model_dump(mode="json"),
+        "visnet_config": model.visnet.config.model_dump(mode="json"),
+        "camera": _camera_dict(model.camera),
+        "prior": model.prior.to_dict(),
+        "info": json.loads(json.dumps(model.info)),
+        "inference": model.inference.model_dump(mode="json"),
+        "models_state": _half_safe_state(model.models.modules().state_dict()),
+        "visnet_state": _half_safe_state(model.visnet.state_dict()),
+    }
+    buf = io.BytesIO()
+    torch.save(payload, buf)
+    tmp = path.with_suffix(path.suffix + ".tmp")
+    tmp.write_bytes(buf.getvalue())
+    tmp.replace(path)
+    return path
+
+
+def _half_safe_state(state: dict) -> dict:
+    return {k: v.detach().clone() for k, v in state.items()}
+
+
+def load_checkpoint(path: Path) -> TrainedModel:
+    """Read a checkpoint written by `save_checkpoint` (a file, or a run directory holding
+    `model.pt`)."""
+    path = Path(path)
+    if path.is_dir():
+        path = path / CHECKPOINT_FILE
+    if not path.exists():
+        raise CheckpointError(f"no checkpoint at {path}")
+    try:
+        payload = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as e:
+        raise CheckpointError(f"{path} is not a readable pushtoknow checkpoint ({e})") from e
+    if not isinstance(payload, dict) or payload.get("format") != CHECKPOINT_FORMAT:
+        raise CheckpointError(f"{path} is not a pushtoknow checkpoint")
+    version = payload.get("format_version")
+    if version != CHECKPOINT_VERSION:
+        raise CheckpointError(
+            f"{path} has checkpoint format version {version}, this pushtoknow "
+            f"{pushtoknow.__version__} reads version {CHECKPOINT_VERSION}; retrain the model "
+            "or use the pushtoknow version that wrote it "
+            f"({payload.get('pushtoknow_version', 'unknown')})"
+        )
+    try:
+        models_config = LearnedModelsConfig.model_validate(payload["models_config"])
+        filter_config = FilterConfig.model_validate(payload["filter_config"])
+        visnet = VisNet(VisNetConfig.model_validate(payload["visnet_config"]))
+        camera = CameraModel(**payload["camera"])
+        model = new_model(
+            payload["variant"],
+            models_config,
+            filter_config,
+            visnet,
+            ParamPrior.from_dict(payload["prior"]),
+            camera,
+            payload.get("info", {}),
+        )
+        model.inference = InferenceSettings.model_validate(payload.get("inference", {}))
+    except CheckpointError:
+        raise
+    except Exception as e:
+        raise CheckpointError(f"{path}: its config does not fit this version ({e})") from e
+    for name, module, state in (
+        ("filter networks", model.models.modules(), payload["models_state"]),
+        ("VisNet", model.visnet, payload["visnet_state"]),
+    ):
+        try:
+            module.load_state_dict(state, strict=True)
+        except RuntimeError as e:
+            first = str(e).splitlines()[0:3]
+            raise CheckpointError(
+                f"{path}: the {name}' weights do not match their config: {' '.join(first)}"
+            ) from e
+    return model.eval()

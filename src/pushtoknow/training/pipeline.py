@@ -1,0 +1,313 @@
+"""`pushtoknow train`: the whole training of one variant, from a dataset to a checkpoint.
+
+Stages (SPEC §3.6), each logged to a CSV file in the run directory:
+1. VisNet, supervised (`visnet.csv`), or reused from another run (`visnet_from`);
+2. VisNet poses of every frame (reference = truth perturbed as in VisNet's training);
+3. supervised warm-up of the filter's networks on ground-truth transitions (`supervised.csv`);
+4. end to end through the filter on truncated windows (`end_to_end.csv`), best validation kept;
+5. calibration of the inference settings (R scale, update stride) on validation pushes by the
+   NLL of the true parameters after a whole push (`calibration.csv`).
+Objects are split into training and validation sets by object (`val_fraction`).
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import platform
+import time
+from pathlib import Path
+
+import torch
+from pydantic import Field
+
+import pushtoknow
+from pushtoknow.common.config import Config
+from pushtoknow.common.errors import DatasetError
+from pushtoknow.datasets.generate import GENERATION_FILE
+from pushtoknow.filters.base import FilterConfig
+from pushtoknow.models.checkpoint import (
+    InferenceSettings,
+    ParamPrior,
+    TrainedModel,
+    Variant,
+    load_checkpoint,
+    new_model,
+    save_checkpoint,
+)
+from pushtoknow.models.learned import LearnedModelsConfig
+from pushtoknow.training.data import (
+    PushTensors,
+    compute_vision_poses,
+    dataset_camera,
+    load_frames,
+    load_push_tensors,
+)
+from pushtoknow.training.end_to_end import EndToEndConfig, evaluate_filter, train_end_to_end
+from pushtoknow.training.supervised import (
+    SupervisedConfig,
+    push_context,
+    train_supervised,
+    true_state,
+)
+from pushtoknow.training.visnet import VisNetTrainConfig, perturb, train_visnet, visnet_measure
+
+
+class CalibrationConfig(Config):
+    noise_scales: tuple[float, ...] = (1.0, 4.0, 16.0, 64.0)
+    update_every: tuple[int, ...] = (1, 5)
+    val_pushes: int = Field(48, ge=1)
+    num_sigma_points: int = Field(32, ge=10)
+
+
+class TrainConfig(Config):
+    """Everything `pushtoknow train` does; YAML-loadable (`--config`)."""
+
+    variant: Variant = "vt-addf"
+    val_fraction: float = Field(0.1, gt=0, lt=1)
+    max_objects: int | None = Field(None, ge=2)
+    visnet: VisNetTrainConfig = VisNetTrainConfig(epochs=10, frame_every=10)
+    models: LearnedModelsConfig = LearnedModelsConfig()
+    filter: FilterConfig = FilterConfig()
+    supervised: SupervisedConfig = SupervisedConfig(steps=1500)
+    end_to_end: EndToEndConfig = EndToEndConfig()
+    calibration: CalibrationConfig = CalibrationConfig()
+    inference_sigma_points: int = Field(100, ge=10)
+
+
+class CsvLog:
+    """Rows of dicts → CSV (columns = union of keys seen so far; file rewritten per row)."""
+
+    def __init__(self, path: Path, echo=None):
+        self.path, self.rows, self.echo = Path(path), [], echo
+
+    def __call__(self, row: dict) -> None:
+        self.rows.append({k: v for k, v in row.items() if not isinstance(v, list | dict)})
+        cols: list[str] = []
+        for r in self.rows:
+            cols += [k for k in r if k not in cols]
+        with open(self.path, "w", newline="") as f:
+            w = csv.DictWriter(f, cols)
+            w.writeheader()
+            w.writerows(self.rows)
+        if self.echo:
+            self.echo(self.path.stem, row)
+
+
+def split_by_object(pt: PushTensors, val_fraction: float, seed: int):
+    """(train, val) PushTensors with no object in both."""
+    objects = torch.unique(pt.object_index)
+    gen = torch.Generator().manual_seed(seed)
+    perm = objects[torch.randperm(len(objects), generator=gen)]
+    n_val = max(1, int(round(val_fraction * len(objects))))
+    is_val = torch.isin(pt.object_index, perm[:n_val])
+    return pt.subset(torch.nonzero(~is_val).squeeze(1)), pt.subset(torch.nonzero(is_val).squeeze(1))
+
+
+def _data_provenance(data: Path) -> dict:
+    gen = Path(data) / GENERATION_FILE
+    if not gen.exists():
+        return {"data": str(data)}
+    g = json.loads(gen.read_text())
+    c = g.get("config", {})
+    return {
+        "data": str(data),
+        "fingerprint": g.get("fingerprint"),
+        "data_seed": c.get("seed"),
+        "objects": c.get("objects"),
+        "pushes_per_object": c.get("pushes"),
+        "objects_from": c.get("objects_from"),
+    }
+
+
+def force_loss_fn(models, pt: PushTensors):
+    """force_fn(push, t) → TacNet's force MSE (units of force_scale²) at the true states of
+    samples t (B,) of pushes `push` (B,), used as a term of the end-to-end loss."""
+    tac = models.observation
+    scale = tac.tac_net.config.force_scale
+
+    def fn(push: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
+        forces, _ = tac.tactile(true_state(pt, push, t), push_context(pt, push, t))
+        meas = pt.tactile[push, t, :2]
+        return ((forces[:, 0] - meas) / scale).square().sum(-1).mean()
+
+    return fn
+
+
+def train_model(
+    data: Path,
+    out: Path,
+    cfg: TrainConfig = TrainConfig(),
+    seed: int = 0,
+    visnet_from: Path | None = None,
+    progress: bool = True,
+    echo=None,
+) -> TrainedModel:
+    """Train `cfg.variant` on the dataset in `data`; write the run to `out` (see module doc)."""
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn
+
+    data, out = Path(data), Path(out)
+    if not data.exists():
+        raise DatasetError(data, "does not exist")
+    out.mkdir(parents=True, exist_ok=True)
+    cfg.to_yaml(out / "config.yaml")
+    torch.manual_seed(seed)
+    t_start = time.perf_counter()
+    timings: dict[str, float] = {}
+    camera, sim_cfg = dataset_camera(data)
+    vision_only = cfg.variant == "v-ddf"
+
+    pt = load_push_tensors(data, cfg.max_objects)
+    train, val = split_by_object(pt, cfg.val_fraction, seed)
+    prior = ParamPrior.from_params(train.params_norm, train.object_index)
+
+    with Progress(
+        "[progress.description]{task.description}",
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        disable=not progress,
+    ) as bar:
+        # 1. VisNet
+        t0 = time.perf_counter()
+        if visnet_from is not None:
+            visnet = load_checkpoint(visnet_from).visnet
+            visnet_summary = {"reused_from": str(visnet_from)}
+        else:
+            frames = load_frames(data, cfg.visnet.frame_every, cfg.max_objects)
+            res = train_visnet(
+                frames, camera, cfg.visnet, seed, log=CsvLog(out / "visnet.csv", echo), progress=bar
+            )
+            del frames
+            visnet, visnet_summary = res.net, res.val_error
+        visnet.eval()
+        timings["visnet_s"] = time.perf_counter() - t0
+
+        # 2. VisNet poses of every frame
+        t0 = time.perf_counter()
+        gen = torch.Generator().manual_seed(seed + 2)
+
+        def measure(rgbd, mask0, pose, pose0):
+            ref = perturb(pose, cfg.visnet, gen)
+            return visnet_measure(visnet, rgbd, mask0, pose0, ref, camera)
+
+        task = bar.add_task("VisNet poses", total=len(pt))
+        pt.vision_pose = compute_vision_poses(
+            data, measure, cfg.max_objects, progress=lambda: bar.advance(task)
+        )
+        train, val = split_by_object(pt, cfg.val_fraction, seed)
+        err = (pt.vision_pose - pt.pose)[..., :2].norm(dim=-1)
+        vision_error = {"vision_xy_rmse_mm": float(err.square().mean().sqrt() * 1e3)}
+        timings["vision_poses_s"] = time.perf_counter() - t0
+
+        model = new_model(
+            cfg.variant,
+            cfg.models,
+            cfg.filter,
+            visnet,
+            prior,
+            camera,
+            info={"seed": seed, "push_speed": sim_cfg.push.speed, **_data_provenance(data)},
+        )
+        models = model.models
+
+        # 3. supervised warm-up
+        t0 = time.perf_counter()
+        sup_cfg = cfg.supervised
+        if vision_only:
+            sup_cfg = sup_cfg.model_copy(update={"force_weight": 0.0, "contact_weight": 0.0})
+        train_supervised(
+            models,
+            train,
+            val,
+            sup_cfg,
+            seed,
+            log=CsvLog(out / "supervised.csv", echo),
+            progress=bar,
+        )
+        timings["supervised_s"] = time.perf_counter() - t0
+
+        # 4. end to end
+        t0 = time.perf_counter()
+        filt = model.build_filter(cfg.end_to_end.num_sigma_points, noise_scale=1.0)
+        force_fn = None if vision_only else force_loss_fn(models, train)
+        _, best = train_end_to_end(
+            filt,
+            train,
+            val,
+            prior,
+            cfg.end_to_end,
+            vision_only,
+            seed,
+            force_fn,
+            log=CsvLog(out / "end_to_end.csv", echo),
+            progress=bar,
+        )
+        timings["end_to_end_s"] = time.perf_counter() - t0
+
+        # 5. calibration of the inference settings
+        t0 = time.perf_counter()
+        model.inference = calibrate(
+            model, val, cfg.calibration, seed, CsvLog(out / "calibration.csv", echo), bar
+        )
+        model.inference = model.inference.model_copy(
+            update={"num_sigma_points": cfg.inference_sigma_points}
+        )
+        timings["calibration_s"] = time.perf_counter() - t0
+
+    timings["total_s"] = time.perf_counter() - t_start
+    model.info.update(
+        {
+            "variant": cfg.variant,
+            "train_objects": int(torch.unique(train.object_index).numel()),
+            "val_objects": int(torch.unique(val.object_index).numel()),
+            "train_pushes": len(train),
+            "visnet_val": visnet_summary,
+            **vision_error,
+            "end_to_end_best": {k: v for k, v in (best or {}).items()},
+            "timings": timings,
+            "machine": f"{platform.processor() or platform.machine()}, "
+            f"{torch.get_num_threads()} threads",
+            "pushtoknow_version": pushtoknow.__version__,
+        }
+    )
+    save_checkpoint(model, out)
+    (out / "training.json").write_text(json.dumps(model.info, indent=1, default=str))
+    return model
+
+
+def calibrate(
+    model: TrainedModel,
+    val: PushTensors,
+    cfg: CalibrationConfig,
+    seed: int,
+    log=None,
+    progress=None,
+) -> InferenceSettings:
+    """Pick (noise_scale, update_every) minimising the validation NLL of the true parameters
+    after a whole push from the prior."""
+    best, best_nll = InferenceSettings(), math.inf
+    grid = [(s, k) for k in cfg.update_every for s in cfg.noise_scales]
+    task = progress.add_task("calibration", total=len(grid)) if progress else None
+    for scale, every in grid:
+        filt = model.build_filter(cfg.num_sigma_points, noise_scale=scale)
+        res = evaluate_filter(
+            filt,
+            val,
+            model.prior,
+            cfg.num_sigma_points,
+            model.vision_only,
+            seed,
+            cfg.val_pushes,
+            update_every=every,
+        )
+        row = {"noise_scale": scale, "update_every": every, **res}
+        if log:
+            log(row)
+        if progress:
+            progress.advance(task)
+        if res["param_nll"] < best_nll:
+            best_nll = res["param_nll"]
+            best = InferenceSettings(update_every=every, noise_scale=scale)
+    return best

@@ -1,0 +1,68 @@
+"""`pad_positions` reproduces the pad track the simulator records."""
+
+import math
+
+import numpy as np
+import pytest
+
+from pushtoknow.testbed.config import PadConfig, PushConfig, SimConfig
+from pushtoknow.testbed.executor import SimulatedExecutor
+from pushtoknow.testbed.objects import load_object_spec
+from pushtoknow.testbed.push import Push, pad_positions
+from pushtoknow.testbed.sim import PAD_CLEARANCE
+
+FAST = SimConfig(push=PushConfig(horizon=1.5), render=False)
+# catalogue:412 is a triangle with a flat face at x = FACE_X (object frame), spanning y ∈ [-0.084,
+# 0.042]: a push at (FACE_X, 0) along -x is normal to it.
+FACE_X = 0.0588333333333333
+# The recorded pad is the commanded one after one physics step (dt = 4 ms) of semi-implicit
+# integration: off by (F / m_pad) dt² from the contact force (F ≈ 6 N on the 50 kg pad: 2e-6 m)
+# and, for a release push, by ½ a dt² (a ≤ 20 m/s² while the pad stops: 1.6e-4 m).
+CONSTANT_TOL = 1e-5
+RELEASE_TOL = 2e-4
+
+
+def _record(push: Push):
+    ex = SimulatedExecutor(load_object_spec("catalogue:412"), FAST, seed=0, randomise_pose=False)
+    try:
+        return ex.execute(push)
+    finally:
+        ex.close()
+
+
+def test_constant_push_matches_record_with_nominal_start():
+    push = Push((FACE_X, 0.0), math.pi, "constant", 0.03)
+    rec = _record(push)
+    pads = pad_positions(push, rec.time, FAST.push)
+    assert pads.shape == rec.pusher.shape == (16, 2)
+    want = PadConfig().radius + FAST.push.approach_gap
+    np.testing.assert_allclose(pads[0], [FACE_X + want, 0.0], atol=1e-9)
+    np.testing.assert_allclose(pads, rec.pusher, atol=CONSTANT_TOL)
+
+
+def test_oblique_push_matches_record_given_its_start():
+    push = Push((FACE_X, 0.01), math.pi - 0.6, "constant", 0.02)
+    rec = _record(push)
+    pads = pad_positions(push, rec.time, FAST.push, start=rec.pusher[0])
+    np.testing.assert_allclose(pads, rec.pusher, atol=CONSTANT_TOL)
+    # the nominal start is off here (the simulator backs off along an oblique line)
+    nominal = pad_positions(push, rec.time, FAST.push)
+    assert np.abs(nominal[0] - rec.pusher[0]).max() > 1e-3
+
+
+def test_release_push_matches_record():
+    cfg = FAST.push
+    push = Push((FACE_X, 0.0), math.pi, "release", 0.3)
+    rec = _record(push)
+    pads = pad_positions(push, rec.time, cfg)
+    np.testing.assert_allclose(
+        pads[0], [FACE_X + PadConfig().radius + PAD_CLEARANCE, 0.0], atol=1e-12
+    )
+    np.testing.assert_allclose(pads, rec.pusher, atol=RELEASE_TOL)
+    # the pad stops once decelerated: last samples identical
+    np.testing.assert_allclose(pads[-1], pads[-2])
+
+
+def test_unknown_profile_rejected():
+    with pytest.raises(ValueError, match="profile"):
+        pad_positions(Push((0.0, 0.0), 0.0, "wobble"), np.zeros(1), PushConfig())
