@@ -113,6 +113,78 @@ def bench_filter(as_json: bool = typer.Option(False, "--json"), seed: int = 0):
     print(json.dumps(res, indent=None if as_json else 1))
 
 
+@bench_app.command("active")
+def bench_active(
+    as_json: bool = typer.Option(False, "--json"),
+    seed: int = 0,
+    candidates: int = typer.Option(16, "--candidates"),
+    sigma_points: int = typer.Option(100, "--sigma-points"),
+):
+    """One active push decision: M candidates, N = 50% of the horizon, C sigma points; prints
+    decision_s_median per score (kl, entropy)."""
+    from pushtoknow.bench.active import run_active_bench
+
+    res = run_active_bench(seed=seed, num_candidates=candidates, num_sigma_points=sigma_points)
+    print(json.dumps(res, indent=None if as_json else 1))
+
+
+@app.command("evaluate-heldout")
+def evaluate_heldout_cmd(
+    model: str = typer.Option("pretrained", "--model"),
+    objects: int = typer.Option(88, "--objects", help="held-out catalogue objects (≤ 88)"),
+    pushes: int = typer.Option(5, "--pushes", min=1),
+    policy: str = typer.Option("uniform", "--policy"),
+    seed: int = typer.Option(0, "--seed"),
+    workers: int = typer.Option(2, "--workers", min=1),
+    out: Path = typer.Option(None, "--out", help="write the metrics JSON here"),
+    as_json: bool = typer.Option(False, "--json"),
+):
+    """NRMSE after each of K pushes on held-out catalogue objects (the catalogue's test split),
+    with the prior-mean predictor and the coverage of the 68% / 90% intervals."""
+    import numpy as np
+    from rich.progress import Progress
+
+    from pushtoknow.common.params import PARAM_NAMES
+    from pushtoknow.evaluation.heldout import evaluate_heldout, heldout_metrics
+    from pushtoknow.pretrained import resolve_model_path
+    from pushtoknow.testbed.objects import catalogue_split
+
+    test_ids = catalogue_split()[1]
+    n = min(objects, len(test_ids))
+    ids = [f"catalogue:{i}" for i in np.random.default_rng(seed).permutation(test_ids)[:n]]
+    path = resolve_model_path(model)
+    with Progress(console=err_console) as bar:
+        task = bar.add_task("held-out objects", total=n)
+        run = evaluate_heldout(
+            path, ids, pushes, policy, seed, workers, progress=lambda: bar.advance(task)
+        )
+    metrics = heldout_metrics(run)
+    metrics.update(
+        {
+            "model": str(path),
+            "policy": policy,
+            "pushes": pushes,
+            "seed": seed,
+            "object_ids": ids,
+            "seconds_per_object_median": float(np.median(run.seconds)),
+        }
+    )
+    if out is not None:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_text(json.dumps(metrics, indent=1))
+    if as_json:
+        print(json.dumps(metrics))
+        return
+    t = Table(title=f"NRMSE on {n} held-out objects ({policy}, seed {seed})")
+    for c in ["after push", *PARAM_NAMES, "overall", "μ·m", "coverage90"]:
+        t.add_column(c, justify="right")
+    fmt = lambda r: [f"{r[k]:.3f}" for k in (*PARAM_NAMES, "overall", "mu_m")]  # noqa: E731
+    t.add_row("prior mean", *fmt(metrics["prior_mean"]), "")
+    for r in metrics["per_push"]:
+        t.add_row(str(r["push"]), *fmt(r), f"{r['coverage90']['overall']:.2f}")
+    console.print(t)
+
+
 @app.command("import-mit")
 def import_mit(
     src: Path = typer.Argument(

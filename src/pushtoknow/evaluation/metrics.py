@@ -32,12 +32,16 @@ def nrmse(pred: np.ndarray, truth: np.ndarray) -> dict[str, float]:
     return out
 
 
-def product_nrmse(pred: np.ndarray, truth: np.ndarray) -> float:
+def product_nrmse(
+    pred: np.ndarray, truth: np.ndarray, pred_product: np.ndarray | None = None
+) -> float:
     """NRMSE of μ·m (the quantity quasi-static force reveals, SPEC §3.8), normalised by the
-    catalogue range of the product."""
+    catalogue range of the product. pred_product (N,): the predicted μ·m when the predictor
+    gives it directly (e.g. a Gaussian belief's E[μ·m] = μ̄·m̄ + Cov(μ, m)); else the product
+    of pred's mass and friction columns."""
     lo = PARAM_RANGES["mass"][0] * PARAM_RANGES["friction"][0]
     hi = PARAM_RANGES["mass"][1] * PARAM_RANGES["friction"][1]
-    p = pred[:, 0] * pred[:, 1]
+    p = pred[:, 0] * pred[:, 1] if pred_product is None else np.asarray(pred_product, float)
     t = truth[:, 0] * truth[:, 1]
     return float(np.sqrt(np.mean((p - t) ** 2)) / (hi - lo))
 

@@ -146,9 +146,9 @@ def _camera_dict(camera: CameraModel) -> dict:
 def save_checkpoint(model: TrainedModel, path: Path) -> Path:
     """Write `model` to path (a directory gets `model.pt`), atomically (temp file + rename)."""
     path = Path(path)
-    if path.is_dir() or path.suffix == "":
-        path.mkdir(parents=True, exist_ok=True)
+    if path.suffix != ".pt":  # a run directory
         path = path / CHECKPOINT_FILE
+    path.parent.mkdir(parents=True, exist_ok=True)
     payload = {
         "format": CHECKPOINT_FORMAT,
         "format_version": CHECKPOINT_VERSION,
@@ -227,6 +227,6 @@ def load_checkpoint(path: Path) -> TrainedModel:
         except RuntimeError as e:
             first = str(e).splitlines()[0:3]
             raise CheckpointError(
-                f"{path}: the {name}' weights do not match their config: {' '.join(first)}"
+                f"{path}: the weights of the {name} do not match their config: {' '.join(first)}"
             ) from e
     return model.eval()

@@ -55,38 +55,43 @@ def true_state(pt: PushTensors, push: torch.Tensor, t: torch.Tensor) -> torch.Te
     return torch.cat([pt.pose[push, t], pt.params_norm[push]], dim=-1).unsqueeze(1)
 
 
-def observation(pt: PushTensors, push: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
-    """z_t (B, 5): VisNet pose (truth if no vision poses were computed) and measured force."""
+def observation(pt: PushTensors, push: torch.Tensor, t: torch.Tensor, tactile=True) -> torch.Tensor:
+    """z_t (B, 5): VisNet pose (truth if no vision poses were computed) and measured force;
+    (B, 3) pose only when `tactile` is False (V-DDF)."""
     pose = pt.vision_pose[push, t] if pt.vision_pose is not None else pt.pose[push, t]
-    return torch.cat([pose, pt.tactile[push, t, :2]], dim=-1)
+    return torch.cat([pose, pt.tactile[push, t, :2]], dim=-1) if tactile else pose
 
 
 def supervised_losses(models: LearnedModels, pt: PushTensors, push, t, cfg: SupervisedConfig):
-    """Losses for transitions t → t+1 of the given pushes; returns (total, parts)."""
+    """Losses for transitions t → t+1 of the given pushes; returns (total, parts). Models
+    without a tactile observation (V-DDF) get no force and contact terms."""
     ctx = push_context(pt, push, t + 1)
     s_t = true_state(pt, push, t)
     s_next = true_state(pt, push, t + 1)
     delta, q = models.dynamics(s_t, ctx)
     target = (pt.pose[push, t + 1] - pt.pose[push, t]).unsqueeze(1)
     proc = 0.5 * ((delta - target).square() / q + q.log()).sum(-1).mean()
-    forces, logit = models.observation.tactile(s_next, ctx)
-    scale = models.observation.tac_net.config.force_scale
-    meas = pt.tactile[push, t + 1]
-    tac = ((forces[:, 0] - meas[:, :2]) / scale).square().sum(-1).mean()
-    contact = F.binary_cross_entropy_with_logits(logit[:, 0], meas[:, 2])
-    z = observation(pt, push, t + 1)
-    h = torch.cat([s_next[:, 0, :3], forces[:, 0].detach()], -1)
+    has_tactile = hasattr(models.observation, "tactile")
+    parts = {"process_nll": proc.item()}
+    total = proc
+    h = s_next[:, 0, :3]
+    if has_tactile:
+        forces, logit = models.observation.tactile(s_next, ctx)
+        scale = models.observation.tac_net.config.force_scale
+        meas = pt.tactile[push, t + 1]
+        tac = ((forces[:, 0] - meas[:, :2]) / scale).square().sum(-1).mean()
+        contact = F.binary_cross_entropy_with_logits(logit[:, 0], meas[:, 2])
+        total = total + cfg.force_weight * tac + cfg.contact_weight * contact
+        parts.update({"force_mse": tac.item(), "contact_bce": contact.item()})
+        h = torch.cat([h, forces[:, 0].detach()], -1)
+    z = observation(pt, push, t + 1, has_tactile)
     resid = z - h
     resid[:, 2] = torch.remainder(resid[:, 2] + math.pi, 2 * math.pi) - math.pi
     r = models.observation_noise(z, ctx)
     noise = 0.5 * (resid.square() / r + r.log()).sum(-1).mean()
-    total = proc + cfg.force_weight * tac + cfg.contact_weight * contact + cfg.noise_weight * noise
-    return total, {
-        "process_nll": proc.item(),
-        "force_mse": tac.item(),
-        "contact_bce": contact.item(),
-        "noise_nll": noise.item(),
-    }
+    total = total + cfg.noise_weight * noise
+    parts["noise_nll"] = noise.item()
+    return total, parts
 
 
 def train_supervised(

@@ -1,0 +1,139 @@
+"""Accuracy on held-out objects: K inference pushes on each, NRMSE after every push, coverage of
+the intervals, the prior-mean predictor beside it (SPEC §3.7).
+
+`pushtoknow evaluate-heldout` (and docs/RESULTS.md) use `evaluate_heldout`; objects are run in
+parallel processes, each seeded by (seed, object id), so results do not depend on `workers`.
+"""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+from dataclasses import dataclass
+
+import numpy as np
+
+from pushtoknow.common.params import PARAM_NAMES, denormalise_params, normalise_params
+from pushtoknow.evaluation.metrics import coverage, nrmse, product_nrmse
+
+MU_M = ("mass", "friction")
+
+
+@dataclass
+class HeldoutRun:
+    """Per object (N) and push (K + 1, index 0 = the prior): mean (N, K+1, 5) SI,
+    std (N, K+1, 5) SI, product (N, K+1) E[μ·m], truth (N, 5), ids (N,)."""
+
+    mean: np.ndarray
+    std: np.ndarray
+    product: np.ndarray
+    truth: np.ndarray
+    ids: list[str]
+    seconds: list[float]
+
+
+def expected_product(mean_norm: np.ndarray, cov_norm: np.ndarray) -> float:
+    """E[m·μ] (SI) under a Gaussian belief in normalised units: m̄μ̄ + Cov(m, μ)."""
+    one = np.ones(len(PARAM_NAMES))
+    scale = denormalise_params(one) - denormalise_params(np.zeros_like(one))
+    mean_si = denormalise_params(np.asarray(mean_norm))
+    return float(mean_si[0] * mean_si[1] + cov_norm[0, 1] * scale[0] * scale[1])
+
+
+def _run_one(args) -> dict:
+    import time
+
+    from pushtoknow.inference.session import InferenceConfig, active_scorer, infer_object
+    from pushtoknow.models.checkpoint import load_checkpoint
+    from pushtoknow.testbed.config import SimConfig
+    from pushtoknow.testbed.executor import SimulatedExecutor
+    from pushtoknow.testbed.objects import load_object_spec
+
+    model_path, object_ref, pushes, policy, seed, sigma_points = args
+    t0 = time.perf_counter()
+    import torch
+
+    torch.set_num_threads(1)
+    model = load_checkpoint(model_path)
+    spec = load_object_spec(object_ref)
+    sim = SimConfig()
+    scorer = active_scorer(policy, sim) if policy.startswith("active") else None
+    ex = SimulatedExecutor(spec, sim, seed=seed, recentre=True)
+    try:
+        ex.observe()
+        cfg = InferenceConfig(pushes=pushes, policy=policy, num_sigma_points=sigma_points)
+        res = infer_object(model, ex, cfg, seed, initial_pose=ex.initial_pose, active_scorer=scorer)
+    finally:
+        ex.close()
+    rows = [res.prior, *res.estimates]
+    return {
+        "id": object_ref,
+        "mean": np.stack([e.mean for e in rows]),
+        "std": np.stack([e.std for e in rows]),
+        "product": np.array([expected_product(e.mean_norm, e.cov_norm) for e in rows]),
+        "truth": spec.params.as_array(),
+        "seconds": time.perf_counter() - t0,
+    }
+
+
+def evaluate_heldout(
+    model_path,
+    objects: list[str],
+    pushes: int = 5,
+    policy: str = "uniform",
+    seed: int = 0,
+    workers: int = 1,
+    sigma_points: int | None = None,
+    progress=None,
+) -> HeldoutRun:
+    """Run inference on each object (`catalogue:ID` or spec strings)."""
+    jobs = [
+        (str(model_path), o, pushes, policy, seed * 100_003 + i, sigma_points)
+        for i, o in enumerate(objects)
+    ]
+    if workers <= 1:
+        out = []
+        for j in jobs:
+            out.append(_run_one(j))
+            if progress:
+                progress()
+    else:
+        with mp.get_context("spawn").Pool(workers) as pool:
+            out = []
+            for r in pool.imap(_run_one, jobs):
+                out.append(r)
+                if progress:
+                    progress()
+    return HeldoutRun(
+        mean=np.stack([r["mean"] for r in out]),
+        std=np.stack([r["std"] for r in out]),
+        product=np.stack([r["product"] for r in out]),
+        truth=np.stack([r["truth"] for r in out]),
+        ids=[r["id"] for r in out],
+        seconds=[r["seconds"] for r in out],
+    )
+
+
+def heldout_metrics(run: HeldoutRun, prior_truth: np.ndarray | None = None) -> dict:
+    """NRMSE per parameter, overall and of μ·m, and 68%/90% coverage, after every push (index 0
+    = the prior the filter starts from); `prior_mean` row: the prior-mean predictor, i.e. the
+    training objects' mean (`prior_truth` (M, 5) SI; default: the filter's prior mean)."""
+    k = run.mean.shape[1]
+    per_push = []
+    for j in range(k):
+        m, s = run.mean[:, j], run.std[:, j]
+        row = {"push": j, **nrmse(m, run.truth)}
+        row["mu_m"] = product_nrmse(m, run.truth, run.product[:, j])
+        row["coverage90"] = coverage(m, s, run.truth, 0.9)
+        row["coverage68"] = coverage(m, s, run.truth, 0.68)
+        per_push.append(row)
+    if prior_truth is not None:
+        prior_mean = np.asarray(prior_truth).mean(0)
+    else:
+        prior_mean = run.mean[0, 0]
+    pm = np.tile(prior_mean, (len(run.truth), 1))
+    prior_row = {**nrmse(pm, run.truth), "mu_m": product_nrmse(pm, run.truth)}
+    return {"per_push": per_push, "prior_mean": prior_row, "objects": len(run.truth)}
+
+
+def normalised(run: HeldoutRun) -> np.ndarray:
+    return normalise_params(run.mean)

@@ -1,0 +1,184 @@
+"""Inference on a novel object with the tiny trained model on the simulated testbed."""
+
+import json
+
+import numpy as np
+import pytest
+import torch
+
+from pushtoknow.common.params import PARAM_NAMES
+from pushtoknow.inference.session import (
+    InferenceConfig,
+    ObjectEstimator,
+    active_scorer,
+    infer_object,
+)
+from pushtoknow.models.checkpoint import load_checkpoint
+from pushtoknow.testbed.executor import SimulatedExecutor
+from pushtoknow.testbed.objects import catalogue_split, load_object_spec
+from tiny_training import SIGMA_POINTS, SIM, tiny_run
+
+OBJECT_ID = 117  # a held-out (test-split) catalogue object
+PUSHES = 2
+SAMPLES = 21  # 2 s pushes at 10 Hz, both ends
+
+
+@pytest.fixture(scope="module", autouse=True)
+def single_thread():
+    """One intra-op thread for this module's tests and module fixtures (tiny tensors; two
+    threads on a loaded 2-core machine make inference ~15x slower). Restored afterwards."""
+    previous = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(previous)
+
+
+@pytest.fixture(scope="module")
+def model(tmp_path_factory):
+    return load_checkpoint(tiny_run(tmp_path_factory))
+
+
+@pytest.fixture(scope="module")
+def spec():
+    assert OBJECT_ID in catalogue_split()[1]
+    return load_object_spec(f"catalogue:{OBJECT_ID}")
+
+
+class ViewRecorder(SimulatedExecutor):
+    """The simulated executor, keeping every view it showed."""
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.views = []
+
+    def observe(self):
+        view = super().observe()
+        self.views.append(view)
+        return view
+
+
+def infer(model, spec, policy="uniform", seed=0, pushes=PUSHES):
+    ex = ViewRecorder(spec, SIM, seed=seed, recentre=True)
+    try:
+        ex.observe()  # as the CLI does: places the object, sets initial_pose
+        cfg = InferenceConfig(pushes=pushes, policy=policy, candidates=4)
+        scorer = active_scorer(policy, SIM) if policy.startswith("active") else None
+        seen = []
+        result = infer_object(
+            model,
+            ex,
+            cfg,
+            seed,
+            initial_pose=ex.initial_pose,
+            truth=spec.params.as_array(),
+            object_name=spec.name,
+            on_push=seen.append,
+            active_scorer=scorer,
+        )
+    finally:
+        ex.close()
+    assert seen == result.estimates
+    return result, ex
+
+
+@pytest.fixture(scope="module")
+def uniform_run(model, spec):
+    return infer(model, spec, "uniform", seed=0)
+
+
+def check_estimate(e, index):
+    assert e.index == index
+    assert e.mean.shape == e.std.shape == e.mean_norm.shape == (5,)
+    assert e.cov_norm.shape == (5, 5)
+    for a in (e.mean, e.std, e.mean_norm, e.cov_norm):
+        assert np.isfinite(a).all()
+    assert (e.std > 0).all()
+    np.testing.assert_allclose(e.cov_norm, e.cov_norm.T, atol=1e-6)
+
+
+def test_infer_object_two_pushes(model, spec, uniform_run):
+    result, _ = uniform_run
+    check_estimate(result.prior, 0)
+    np.testing.assert_allclose(result.prior.mean_norm, model.prior.mean.numpy(), rtol=1e-6)
+    assert len(result.estimates) == len(result.records) == len(result.poses) == PUSHES
+    for k, (e, rec, poses) in enumerate(
+        zip(result.estimates, result.records, result.poses, strict=True)
+    ):
+        check_estimate(e, k + 1)
+        assert e.push == rec.push and e.push.speed == model.info["push_speed"]
+        assert len(rec.time) == SAMPLES and poses.shape == (SAMPLES, 3)
+        assert np.isfinite(poses).all()
+    np.testing.assert_array_equal(result.truth, spec.params.as_array())
+    assert result.object_name == spec.name
+    # The first push starts from the given initial pose (the true one in simulation).
+    np.testing.assert_allclose(result.poses[0][0], result.records[0].pose[0], atol=1e-6)
+
+
+def test_json_has_the_documented_keys(spec, uniform_run):
+    result, _ = uniform_run
+    report = json.loads(json.dumps(result.to_json()))  # plain JSON
+    assert set(report) >= {"pushes", "truth", "prior", "object"}
+    assert len(report["pushes"]) == PUSHES
+    for p in [*report["pushes"], report["prior"]]:
+        assert list(p["estimate"]) == list(PARAM_NAMES)
+        assert list(PARAM_NAMES) == ["mass", "friction", "com_x", "com_y", "inertia"]
+        for v in p["estimate"].values():
+            assert set(v) == {"mean", "std"} and v["std"] > 0
+    assert set(report["pushes"][0]["push"]) == {"contact", "direction", "profile", "speed"}
+    truth = spec.params
+    assert report["truth"] == {
+        "mass": truth.mass,
+        "friction": truth.friction,
+        "com_x": truth.com_x,
+        "com_y": truth.com_y,
+        "inertia": truth.inertia,
+    }
+
+
+def test_same_seed_gives_identical_json(model, spec, uniform_run):
+    again, _ = infer(model, spec, "uniform", seed=0)
+    assert json.dumps(again.to_json()) == json.dumps(uniform_run[0].to_json())
+    other, _ = infer(model, spec, "uniform", seed=1, pushes=1)
+    assert other.to_json()["pushes"][0] != uniform_run[0].to_json()["pushes"][0]
+
+
+@pytest.mark.parametrize("policy", ["random", "active-entropy"])
+def test_policies_run(model, spec, policy):
+    result, _ = infer(model, spec, policy, seed=2)
+    assert len(result.estimates) == PUSHES
+    for k, e in enumerate(result.estimates):
+        check_estimate(e, k + 1)
+
+
+def test_active_policy_without_scorer_is_refused(model, spec):
+    ex = SimulatedExecutor(spec, SIM, seed=0, recentre=True)
+    try:
+        with pytest.raises(ValueError, match="active"):
+            infer_object(model, ex, InferenceConfig(pushes=1, policy="active-kl"))
+    finally:
+        ex.close()
+
+
+def test_recentring_keeps_theta_and_reports_the_move(uniform_run):
+    result, ex = uniform_run
+    first, second = result.records
+    # one view before inference (the CLI's), then one per push
+    assert len(ex.views) == 1 + PUSHES
+    assert ex.views[0].moved_by is None and ex.views[1].moved_by is None
+    moved = np.asarray(ex.views[2].moved_by)
+    np.testing.assert_allclose(moved, ex.initial_pose[:2] - first.pose[-1][:2], atol=1e-9)
+    assert np.linalg.norm(moved) > 1e-3  # the first push moved the object
+    # The second push starts where the first did, turned as the first push left it.
+    np.testing.assert_allclose(second.pose[0][:2], ex.initial_pose[:2], atol=1e-3)
+    dtheta = np.angle(np.exp(1j * (second.pose[0][2] - first.pose[-1][2])))
+    assert abs(dtheta) < 1e-2
+
+
+def test_estimator_start_belief(model):
+    est = ObjectEstimator(model, InferenceConfig(num_sigma_points=SIGMA_POINTS), seed=0)
+    mean, cov = est.start_belief(np.array([0.01, -0.02, 0.3]))
+    assert mean.shape == (1, 8) and cov.shape == (1, 8, 8)
+    torch.testing.assert_close(mean[0, :3], torch.tensor([0.01, -0.02, 0.3]))
+    torch.testing.assert_close(cov[0, 3:, 3:], model.prior.cov)
+    assert torch.all(cov[0, :3, 3:] == 0)
+    assert est.num_sigma_points == SIGMA_POINTS
