@@ -167,6 +167,15 @@ def evaluate_heldout_cmd(
             "seed": seed,
             "object_ids": ids,
             "seconds_per_object_median": float(np.median(run.seconds)),
+            "per_object": [
+                {
+                    "id": i,
+                    "truth": run.truth[n].tolist(),
+                    "mean": run.mean[n, -1].tolist(),
+                    "std": run.std[n, -1].tolist(),
+                }
+                for n, i in enumerate(run.ids)
+            ],
         }
     )
     if out is not None:
