@@ -8,11 +8,7 @@ networks a few units wide and a handful of optimisation steps per stage (≈ 3 s
 
 from __future__ import annotations
 
-from collections.abc import Iterator
-from contextlib import contextmanager
 from pathlib import Path
-
-import torch
 
 from pushtoknow.datasets.generate import GenerationConfig, generate_dataset
 from pushtoknow.testbed.config import PushConfig, SimConfig
@@ -72,17 +68,6 @@ def tiny_train_config() -> TrainConfig:
     return TrainConfig.model_validate(TINY_TRAIN)
 
 
-@contextmanager
-def one_thread() -> Iterator[None]:
-    """Tiny tensors: one intra-op thread is faster on a shared 2-core machine."""
-    previous = torch.get_num_threads()
-    torch.set_num_threads(1)
-    try:
-        yield
-    finally:
-        torch.set_num_threads(previous)
-
-
 def tiny_dataset(tmp_path_factory) -> Path:
     if "data" not in _cache:
         out = tmp_path_factory.mktemp("tiny-data")
@@ -103,7 +88,6 @@ def tiny_run(tmp_path_factory) -> Path:
     if "run" not in _cache:
         data = tiny_dataset(tmp_path_factory)
         out = tmp_path_factory.mktemp("tiny-run")
-        with one_thread():
-            train_model(data, out, tiny_train_config(), seed=0, progress=False)
+        train_model(data, out, tiny_train_config(), seed=0, progress=False)
         _cache["run"] = out
     return _cache["run"]

@@ -13,14 +13,13 @@ from pushtoknow.common.errors import CheckpointError
 from pushtoknow.common.params import PARAM_NAMES
 from pushtoknow.testbed.objects import load_object_spec
 from pushtoknow.training.pipeline import TrainConfig
-from tiny_training import DATA_OBJECTS, one_thread, tiny_dataset, tiny_train_config
+from tiny_training import DATA_OBJECTS, tiny_dataset, tiny_train_config
 
 STAGES = ("visnet", "supervised", "end_to_end", "calibration")
 
 
 def invoke(*args):
-    with one_thread():
-        return CliRunner().invoke(app, [str(a) for a in args])
+    return CliRunner().invoke(app, [str(a) for a in args])
 
 
 def run_main(monkeypatch, capsys, *args):

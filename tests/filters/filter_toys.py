@@ -5,7 +5,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import pytest
 import torch
 
 from pushtoknow.filters import FilterConfig
@@ -173,16 +172,6 @@ class ToyPushObservation(LinearObservation.__mro__[1]):  # ObservationModel
         si = denormalise_params(states[..., 3:])
         force = si[..., 0] * si[..., 1] * 9.81
         return torch.cat([states[..., :3], torch.stack([force, 20.0 * force * si[..., 3]], -1)], -1)
-
-
-@pytest.fixture(autouse=True)
-def single_thread():
-    """These tests run many tiny tensor ops: one intra-op thread is faster than two and
-    immune to OpenMP spin-waits on a shared 2-core machine. Restored afterwards."""
-    previous = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(previous)
 
 
 def random_walk_toy() -> LinearToy:

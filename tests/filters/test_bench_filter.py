@@ -1,7 +1,5 @@
 """Smoke test of the filter benchmark (tiny sizes; the real numbers come from the CLI)."""
 
-from filter_toys import single_thread  # noqa: F401
-
 from pushtoknow.bench.filter import run_filter_bench
 
 

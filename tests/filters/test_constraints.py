@@ -2,7 +2,6 @@
 
 import pytest
 import torch
-from filter_toys import single_thread  # noqa: F401
 from shapely.geometry import Point, Polygon
 
 from pushtoknow.common.errors import ShapeError

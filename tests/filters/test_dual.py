@@ -2,7 +2,7 @@
 
 import pytest
 import torch
-from filter_toys import F64, pushed_block, random_walk_toy, single_thread  # noqa: F401
+from filter_toys import F64, pushed_block, random_walk_toy
 
 from pushtoknow.common.errors import ShapeError
 from pushtoknow.filters import DualFilter, FilterConfig, FilterNoise

@@ -3,7 +3,7 @@ float64 through one predict + update, including an update where the ESS guard te
 
 import pytest
 import torch
-from filter_toys import F64, planar_toy, pushed_block, single_thread  # noqa: F401
+from filter_toys import F64, planar_toy, pushed_block
 from torch.autograd import gradcheck
 from torch.func import functional_call
 

@@ -3,12 +3,11 @@
 import math
 
 import torch
-from filter_toys import (  # noqa: F401
+from filter_toys import (
     F64,
     ToyPushDynamics,
     ToyPushObservation,
     random_walk_toy,
-    single_thread,
 )
 from hypothesis import given, settings
 from hypothesis import strategies as st

@@ -5,7 +5,6 @@ import math
 import numpy as np
 import pytest
 import torch
-from filter_toys import single_thread  # noqa: F401
 
 from pushtoknow.common.errors import PushToKnowError, ShapeError
 from pushtoknow.filters.gaussian import (

@@ -4,7 +4,7 @@ import math
 
 import pytest
 import torch
-from filter_toys import F64, planar_toy, pushed_block, single_thread  # noqa: F401
+from filter_toys import F64, planar_toy, pushed_block
 
 from pushtoknow.filters import JointFilter, PoseObservation, vision_only_filter
 from pushtoknow.models.analytic import ConstantObservationNoise

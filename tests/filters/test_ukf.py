@@ -5,7 +5,6 @@ import math
 import numpy as np
 import pytest
 import torch
-from filter_toys import single_thread  # noqa: F401
 from filterpy.kalman import MerweScaledSigmaPoints as FpPoints
 from filterpy.kalman import UnscentedKalmanFilter
 

@@ -23,16 +23,6 @@ PUSHES = 2
 SAMPLES = 21  # 2 s pushes at 10 Hz, both ends
 
 
-@pytest.fixture(scope="module", autouse=True)
-def single_thread():
-    """One intra-op thread for this module's tests and module fixtures (tiny tensors; two
-    threads on a loaded 2-core machine make inference ~15x slower). Restored afterwards."""
-    previous = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(previous)
-
-
 @pytest.fixture(scope="module")
 def model(tmp_path_factory):
     return load_checkpoint(tiny_run(tmp_path_factory))

@@ -42,7 +42,6 @@ def test_shipped_model_estimates_one_push():
     spec = load_object_spec(f"catalogue:{demo_object_id()}")
     ex = SimulatedExecutor(spec, seed=0, recentre=True)
     try:
-        ex.observe()
         res = infer_object(
             model, ex, InferenceConfig(pushes=1, num_sigma_points=30), 0, ex.initial_pose
         )

@@ -2,7 +2,7 @@
 
 import pytest
 import torch
-from tiny_models import CAMERA, prior, single_thread, square_context, tiny_config  # noqa: F401
+from tiny_models import CAMERA, prior, square_context, tiny_config
 
 from pushtoknow.common.errors import CheckpointError, PushToKnowError
 from pushtoknow.filters.base import FilterConfig

@@ -4,7 +4,7 @@ import dataclasses
 
 import pytest
 import torch
-from tiny_models import CAMERA, prior, single_thread, square_context, tiny_config  # noqa: F401
+from tiny_models import CAMERA, prior, square_context, tiny_config
 from torch.autograd import gradcheck
 from torch.func import functional_call
 

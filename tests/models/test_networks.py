@@ -4,7 +4,6 @@ import math
 
 import pytest
 import torch
-from tiny_models import single_thread  # noqa: F401
 from torch import nn
 
 from pushtoknow.common.errors import ShapeError

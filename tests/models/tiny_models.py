@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import pytest
 import torch
 
 from pushtoknow.common.camera import CameraModel
@@ -56,13 +55,3 @@ def prior(batch: int, dtype=torch.float32) -> tuple[torch.Tensor, torch.Tensor]:
     mean = torch.zeros(batch, 8, dtype=dtype)
     var = torch.tensor([1e-4, 1e-4, 1e-2, 0.2, 0.2, 0.2, 0.2, 0.2], dtype=dtype)
     return mean, torch.diag(var).expand(batch, 8, 8).clone()
-
-
-@pytest.fixture(autouse=True)
-def single_thread():
-    """Tiny tensors: one intra-op thread is faster and immune to OpenMP spin-waits on a
-    shared 2-core machine. Restored afterwards."""
-    previous = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(previous)

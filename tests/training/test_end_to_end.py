@@ -24,16 +24,6 @@ from tiny_training import (
 )
 
 
-@pytest.fixture(scope="module", autouse=True)
-def single_thread():
-    """One intra-op thread for this module's tests and module fixtures (tiny tensors; two
-    threads on a loaded 2-core machine make inference ~15x slower). Restored afterwards."""
-    previous = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(previous)
-
-
 @pytest.fixture(scope="module")
 def pushes(tiny_data):
     return load_push_tensors(tiny_data)

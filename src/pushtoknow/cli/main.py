@@ -393,14 +393,17 @@ def run_inference(
     show = Console(stderr=True) if as_json else console
     sim_cfg = SimConfig()
     cfg = InferenceConfig(pushes=pushes, policy=policy, num_sigma_points=sigma_points)
-    scorer = active_scorer(policy, sim_cfg) if policy.startswith("active") else None
+    scorer = (
+        active_scorer(policy, sim_cfg, cfg.active_horizon_fraction)
+        if policy.startswith("active")
+        else None
+    )
     ex = SimulatedExecutor(spec, sim_cfg, seed=seed, recentre=True)
     show.print(
         f"[bold]{spec.name or 'object'}[/] ({spec.shape if isinstance(spec.shape, str) else ''})"
         f", model {model.variant} ({model_ref}), policy {policy}, {pushes} pushes, seed {seed}"
     )
     try:
-        ex.observe()
 
         def on_push(e) -> None:
             show.print(_estimate_table(e, truth, f"after push {e.index}"))

@@ -12,10 +12,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pushtoknow.common.params import PARAM_NAMES, denormalise_params, normalise_params
+from pushtoknow.common.params import denormalise_params, param_scale
 from pushtoknow.evaluation.metrics import coverage, nrmse, product_nrmse
-
-MU_M = ("mass", "friction")
 
 
 @dataclass
@@ -33,8 +31,7 @@ class HeldoutRun:
 
 def expected_product(mean_norm: np.ndarray, cov_norm: np.ndarray) -> float:
     """E[m·μ] (SI) under a Gaussian belief in normalised units: m̄μ̄ + Cov(m, μ)."""
-    one = np.ones(len(PARAM_NAMES))
-    scale = denormalise_params(one) - denormalise_params(np.zeros_like(one))
+    scale = param_scale()
     mean_si = denormalise_params(np.asarray(mean_norm))
     return float(mean_si[0] * mean_si[1] + cov_norm[0, 1] * scale[0] * scale[1])
 
@@ -56,11 +53,14 @@ def _run_one(args) -> dict:
     model = load_checkpoint(model_path)
     spec = load_object_spec(object_ref)
     sim = SimConfig()
-    scorer = active_scorer(policy, sim) if policy.startswith("active") else None
+    cfg = InferenceConfig(pushes=pushes, policy=policy, num_sigma_points=sigma_points)
+    scorer = (
+        active_scorer(policy, sim, cfg.active_horizon_fraction)
+        if policy.startswith("active")
+        else None
+    )
     ex = SimulatedExecutor(spec, sim, seed=seed, recentre=True)
     try:
-        ex.observe()
-        cfg = InferenceConfig(pushes=pushes, policy=policy, num_sigma_points=sigma_points)
         res = infer_object(model, ex, cfg, seed, initial_pose=ex.initial_pose, active_scorer=scorer)
     finally:
         ex.close()
@@ -133,7 +133,3 @@ def heldout_metrics(run: HeldoutRun, prior_truth: np.ndarray | None = None) -> d
     pm = np.tile(prior_mean, (len(run.truth), 1))
     prior_row = {**nrmse(pm, run.truth), "mu_m": product_nrmse(pm, run.truth)}
     return {"per_push": per_push, "prior_mean": prior_row, "objects": len(run.truth)}
-
-
-def normalised(run: HeldoutRun) -> np.ndarray:
-    return normalise_params(run.mean)

@@ -30,7 +30,7 @@ from pydantic import Field
 from pushtoknow.active.policies import ActivePolicy
 from pushtoknow.common.camera import CameraModel
 from pushtoknow.common.config import Config
-from pushtoknow.common.params import PARAM_NAMES, PARAM_RANGES, denormalise_params
+from pushtoknow.common.params import PARAM_NAMES, denormalise_params, param_scale
 from pushtoknow.geometry.affordances import mask_contour, sample_push_affordances
 from pushtoknow.models.checkpoint import TrainedModel
 from pushtoknow.models.learned import PushContext
@@ -114,17 +114,12 @@ def _push_dict(p: Push) -> dict:
     }
 
 
-def _si_scale() -> np.ndarray:
-    """d(SI)/d(normalised) per parameter (the normalisation is affine)."""
-    return np.array([(PARAM_RANGES[n][1] - PARAM_RANGES[n][0]) / 2 for n in PARAM_NAMES])
-
-
 def belief_to_estimate(index: int, mean: torch.Tensor, cov: torch.Tensor, push=None):
     """Normalised parameter belief (K,), (K, K) → `PushEstimate` in SI."""
     m = mean.detach().double()
     c = cov.detach().double()
     si = denormalise_params(m).numpy()
-    std = np.sqrt(np.clip(torch.diagonal(c).numpy(), 0, None)) * _si_scale()
+    std = np.sqrt(np.clip(torch.diagonal(c).numpy(), 0, None)) * param_scale()
     return PushEstimate(index, si, std, m.numpy(), c.numpy(), push)
 
 
@@ -240,9 +235,7 @@ class ObjectEstimator:
         """Run the filter over one executed push; updates the parameter belief. Returns the
         filtered pose means (T, 3)."""
         filt, cam = self.filter, self.camera
-        p0 = torch.as_tensor(pose0, dtype=torch.float32)
         mean, cov = self.start_belief(pose0)
-        mask0 = torch.as_tensor(s0, dtype=torch.float32)[None, None]
         base = self.context(s0, pose0, torch.zeros(1, 2), [rec.push])
         frames = frames_as_tensors(rec.rgb, rec.depth, cam)
         pusher = torch.as_tensor(rec.pusher, dtype=torch.float32)
@@ -256,7 +249,7 @@ class ObjectEstimator:
             mean, cov = filt.predict(mean, cov, ctx, noise)
             if t % every == 0 or t == steps:
                 z_pose = visnet_measure(
-                    self.model.visnet, frames[t : t + 1], mask0, p0[None], mean[:, :3], cam
+                    self.model.visnet, frames[t : t + 1], base.mask0, base.pose0, mean[:, :3], cam
                 )
                 z = (
                     z_pose

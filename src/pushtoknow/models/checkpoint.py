@@ -162,8 +162,8 @@ def save_checkpoint(model: TrainedModel, path: Path) -> Path:
         "prior": model.prior.to_dict(),
         "info": json.loads(json.dumps(model.info)),
         "inference": model.inference.model_dump(mode="json"),
-        "models_state": _half_safe_state(model.models.modules().state_dict()),
-        "visnet_state": _half_safe_state(model.visnet.state_dict()),
+        "models_state": model.models.modules().state_dict(),
+        "visnet_state": model.visnet.state_dict(),
     }
     buf = io.BytesIO()
     torch.save(payload, buf)
@@ -171,10 +171,6 @@ def save_checkpoint(model: TrainedModel, path: Path) -> Path:
     tmp.write_bytes(buf.getvalue())
     tmp.replace(path)
     return path
-
-
-def _half_safe_state(state: dict) -> dict:
-    return {k: v.detach().clone() for k, v in state.items()}
 
 
 def load_checkpoint(path: Path) -> TrainedModel:

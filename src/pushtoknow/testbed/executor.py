@@ -74,7 +74,6 @@ class SimulatedExecutor(PushExecutor):
         self._first_pose: np.ndarray | None = None
         self._last_pose: np.ndarray | None = None
         self._moved_by: tuple[float, float] | None = None
-        self.initial_pose: np.ndarray | None = None  # the true pose at the first placement
 
     @property
     def spec(self) -> ObjectSpec:
@@ -100,8 +99,14 @@ class SimulatedExecutor(PushExecutor):
         placed = self.sim.reset(pose)
         if self._first_pose is None:
             self._first_pose = placed
-            self.initial_pose = placed.copy()
         return placed
+
+    @property
+    def initial_pose(self) -> np.ndarray:
+        """(3,) the true pose of the first placement (placing the object if not yet done)."""
+        if self._first_pose is None:
+            self.place()
+        return self._first_pose.copy()
 
     def observe(self) -> View:
         if not self._placed:

@@ -28,7 +28,7 @@ from pushtoknow.filters.base import BeliefFilter
 from pushtoknow.filters.gaussian import safe_cholesky
 from pushtoknow.models.checkpoint import ParamPrior
 from pushtoknow.training.data import PushTensors
-from pushtoknow.training.supervised import push_context
+from pushtoknow.training.supervised import observation, push_context
 
 
 class EndToEndConfig(Config):
@@ -42,6 +42,9 @@ class EndToEndConfig(Config):
     pose_nll_weight: float = Field(0.1, ge=0)
     param_nll_weight: float = Field(1.0, ge=0)
     pose_mse_weight: float = Field(1.0, ge=0)
+    pose_length_scale: float = Field(
+        0.1, gt=0, description="m per unit of position error in the pose MSE (angles in rad)"
+    )
     force_weight: float = Field(1.0, ge=0)
     prior_start_fraction: float = Field(
         0.5, ge=0, le=1, description="share of windows starting from the catalogue prior"
@@ -57,15 +60,6 @@ class EndToEndConfig(Config):
     val_num_sigma_points: int = Field(32, ge=10)
 
 
-def observations(
-    pt: PushTensors, push: torch.Tensor, t: torch.Tensor, vision_only: bool
-) -> torch.Tensor:
-    """z_t (B, 3) or (B, 5) at samples t (B,): VisNet pose (truth when none was computed) and
-    measured force."""
-    pose = pt.vision_pose[push, t] if pt.vision_pose is not None else pt.pose[push, t]
-    return pose if vision_only else torch.cat([pose, pt.tactile[push, t, :2]], -1)
-
-
 def gaussian_nll(residual: torch.Tensor, cov: torch.Tensor) -> torch.Tensor:
     """-log N(residual; 0, cov) per batch element: residual (B, K), cov (B, K, K) → (B,)."""
     chol = safe_cholesky(cov)
@@ -74,11 +68,16 @@ def gaussian_nll(residual: torch.Tensor, cov: torch.Tensor) -> torch.Tensor:
     ).log_prob(residual)
 
 
+def pose_error(mean: torch.Tensor, pose: torch.Tensor) -> torch.Tensor:
+    """Belief mean's pose minus the true pose (B, 3) (m, m, rad; angle wrapped)."""
+    return torch.cat([mean[:, :2] - pose[:, :2], wrap_angle(mean[:, 2:3] - pose[:, 2:3])], -1)
+
+
 def belief_losses(
     mean: torch.Tensor, cov: torch.Tensor, pose: torch.Tensor, params: torch.Tensor, p: int = 3
 ) -> dict[str, torch.Tensor]:
     """NLL of the true pose (B, 3) and parameters (B, K) under the belief, each (B,)."""
-    dpose = torch.cat([mean[:, :2] - pose[:, :2], wrap_angle(mean[:, 2:p] - pose[:, 2:])], -1)
+    dpose = pose_error(mean, pose)
     return {
         "pose_nll": gaussian_nll(dpose, cov[:, :p, :p]),
         "param_nll": gaussian_nll(mean[:, p:] - params, cov[:, p:, p:]),
@@ -134,7 +133,7 @@ def run_window(
     for k in range(steps):
         t = t0 + k + 1
         ctx = push_context(pt, push, t)
-        z = observations(pt, push, t, vision_only)
+        z = observation(pt, push, t, tactile=not vision_only)
         noise = filt.draw_noise(b, gen, mean.dtype, num_sigma_points=num_sigma_points)
         if (k + 1) % update_every == 0 or k == steps - 1:
             mean, cov, _ = filt(mean, cov, z, ctx, noise)
@@ -161,14 +160,13 @@ def window_loss(
     mean0, cov0 = initial_belief(pt.pose[push, t0], params, prior, cfg, gen, from_prior)
     parts = {"pose_nll": 0.0, "param_nll": 0.0, "pose_mse": 0.0}
     total = torch.zeros(())
-    scale = 0.1  # m: pose error measured in 10 cm units, angle in rad
     for t, mean, cov in run_window(
         filt, pt, push, t0, cfg.window, mean0, cov0, gen, cfg.num_sigma_points, vision_only
     ):
         truth = pt.pose[push, t]
         losses = belief_losses(mean, cov, truth, params)
         err = losses["pose_err"]
-        mse = ((err[:, :2] / scale).square().sum(-1) + err[:, 2].square()).mean()
+        mse = ((err[:, :2] / cfg.pose_length_scale).square().sum(-1) + err[:, 2].square()).mean()
         step = (
             cfg.pose_nll_weight * losses["pose_nll"].mean()
             + cfg.param_nll_weight * losses["param_nll"].mean()
@@ -201,23 +199,21 @@ def evaluate_filter(
     units) and NLL of the true parameters at the end, pose RMSE over the push."""
     gen = torch.Generator().manual_seed(seed)
     n = len(pt) if max_pushes is None else min(max_pushes, len(pt))
-    cfg = EndToEndConfig()
+    start = EndToEndConfig(init_pose_std=(1e-3, 1e-3, 0.01))
     sq, nll, pose_sq, prior_sq, z90 = [], [], [], [], []
     for i in range(0, n, batch):
         push = torch.arange(i, min(i + batch, n))
         b = len(push)
         params = pt.params_norm[push]
-        zero_noise = cfg.model_copy(update={"init_pose_std": (1e-3, 1e-3, 0.01)})
         mean0, cov0 = initial_belief(
-            pt.pose[push, 0], params, prior, zero_noise, gen, torch.ones(b, dtype=torch.bool)
+            pt.pose[push, 0], params, prior, start, gen, torch.ones(b, dtype=torch.bool)
         )
         errs = []
         steps = pt.horizon_steps - 1
-        for t, mean, cov in run_window(
+        for t, mean, cov in run_window(  # noqa: B007 (the last belief is used below)
             filt, pt, push, 0, steps, mean0, cov0, gen, num_sigma_points, vision_only, update_every
         ):
-            e = belief_losses(mean, cov, pt.pose[push, t], params)["pose_err"]
-            errs.append(e)
+            errs.append(pose_error(mean, pt.pose[push, t]))
         final = belief_losses(mean, cov, pt.pose[push, -1], params)
         sq.append((mean[:, 3:] - params).square())
         prior_sq.append((prior.mean - params).square())

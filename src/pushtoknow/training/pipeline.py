@@ -45,12 +45,7 @@ from pushtoknow.training.data import (
     load_push_tensors,
 )
 from pushtoknow.training.end_to_end import EndToEndConfig, evaluate_filter, train_end_to_end
-from pushtoknow.training.supervised import (
-    SupervisedConfig,
-    push_context,
-    train_supervised,
-    true_state,
-)
+from pushtoknow.training.supervised import SupervisedConfig, tactile_losses, train_supervised
 from pushtoknow.training.visnet import VisNetTrainConfig, perturb, train_visnet, visnet_measure
 
 
@@ -124,13 +119,9 @@ def _data_provenance(data: Path) -> dict:
 def force_loss_fn(models, pt: PushTensors):
     """force_fn(push, t) → TacNet's force MSE (units of force_scale²) at the true states of
     samples t (B,) of pushes `push` (B,), used as a term of the end-to-end loss."""
-    tac = models.observation
-    scale = tac.tac_net.config.force_scale
 
     def fn(push: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
-        forces, _ = tac.tactile(true_state(pt, push, t), push_context(pt, push, t))
-        meas = pt.tactile[push, t, :2]
-        return ((forces[:, 0] - meas) / scale).square().sum(-1).mean()
+        return tactile_losses(models, pt, push, t)[1]
 
     return fn
 
@@ -159,8 +150,6 @@ def train_model(
     vision_only = cfg.variant == "v-ddf"
 
     pt = load_push_tensors(data, cfg.max_objects)
-    train, val = split_by_object(pt, cfg.val_fraction, seed)
-    prior = ParamPrior.from_params(train.params_norm, train.object_index)
 
     with Progress(
         "[progress.description]{task.description}",
@@ -197,6 +186,7 @@ def train_model(
             data, measure, cfg.max_objects, progress=lambda: bar.advance(task)
         )
         train, val = split_by_object(pt, cfg.val_fraction, seed)
+        prior = ParamPrior.from_params(train.params_norm, train.object_index)
         err = (pt.vision_pose - pt.pose)[..., :2].norm(dim=-1)
         vision_error = {"vision_xy_rmse_mm": float(err.square().mean().sqrt() * 1e3)}
         timings["vision_poses_s"] = time.perf_counter() - t0

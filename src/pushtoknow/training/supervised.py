@@ -62,6 +62,19 @@ def observation(pt: PushTensors, push: torch.Tensor, t: torch.Tensor, tactile=Tr
     return torch.cat([pose, pt.tactile[push, t, :2]], dim=-1) if tactile else pose
 
 
+def tactile_losses(models: LearnedModels, pt: PushTensors, push, t, ctx=None):
+    """TacNet at the true states of samples t (B,) of pushes `push` (B,): predicted forces
+    (B, 2) N, force MSE against the measurement (units of force_scale²) and contact BCE.
+    ctx: `push_context(pt, push, t)` if the caller already has it (its action map is cached)."""
+    ctx = push_context(pt, push, t) if ctx is None else ctx
+    forces, logit = models.observation.tactile(true_state(pt, push, t), ctx)
+    scale = models.observation.tac_net.config.force_scale
+    meas = pt.tactile[push, t]
+    mse = ((forces[:, 0] - meas[:, :2]) / scale).square().sum(-1).mean()
+    bce = F.binary_cross_entropy_with_logits(logit[:, 0], meas[:, 2])
+    return forces[:, 0], mse, bce
+
+
 def supervised_losses(models: LearnedModels, pt: PushTensors, push, t, cfg: SupervisedConfig):
     """Losses for transitions t → t+1 of the given pushes; returns (total, parts). Models
     without a tactile observation (V-DDF) get no force and contact terms."""
@@ -76,14 +89,10 @@ def supervised_losses(models: LearnedModels, pt: PushTensors, push, t, cfg: Supe
     total = proc
     h = s_next[:, 0, :3]
     if has_tactile:
-        forces, logit = models.observation.tactile(s_next, ctx)
-        scale = models.observation.tac_net.config.force_scale
-        meas = pt.tactile[push, t + 1]
-        tac = ((forces[:, 0] - meas[:, :2]) / scale).square().sum(-1).mean()
-        contact = F.binary_cross_entropy_with_logits(logit[:, 0], meas[:, 2])
+        forces, tac, contact = tactile_losses(models, pt, push, t + 1, ctx)
         total = total + cfg.force_weight * tac + cfg.contact_weight * contact
         parts.update({"force_mse": tac.item(), "contact_bce": contact.item()})
-        h = torch.cat([h, forces[:, 0].detach()], -1)
+        h = torch.cat([h, forces.detach()], -1)
     z = observation(pt, push, t + 1, has_tactile)
     resid = z - h
     resid[:, 2] = torch.remainder(resid[:, 2] + math.pi, 2 * math.pi) - math.pi
