@@ -69,36 +69,18 @@ def save_push_strip(rec, camera, path: Path, title: str = "") -> None:
 
 
 def plot_estimates(result, path: Path, title: str = "") -> None:
-    """The paper's Fig. 5: each parameter's mean ± 2 std (≈95%) versus push number (0 = the
-    prior), the truth as a dashed line when known."""
-    from pushtoknow.common.params import PARAM_NAMES, PARAM_RANGES
+    """The paper's Fig. 5 for one inference run (`InferenceResult`): each parameter's mean with
+    ±1σ and ±2σ bands versus push number (0 = the prior), the truth as a dashed line when known.
+    Drawn by `evaluation.figures.plot_estimates_vs_push`."""
+    from pushtoknow.common.params import PARAM_NAMES
+    from pushtoknow.evaluation.figures import plot_estimates_vs_push
 
-    labels = {
-        "mass": "mass (kg)",
-        "friction": "friction μ",
-        "com_x": "c_x (m)",
-        "com_y": "c_y (m)",
-        "inertia": "I_z (kg·m²)",
-    }
     rows = [result.prior, *result.estimates]
-    k = np.array([e.index for e in rows])
-    mean = np.stack([e.mean for e in rows])
-    std = np.stack([e.std for e in rows])
-    fig, axes = plt.subplots(1, len(PARAM_NAMES), figsize=(3.2 * len(PARAM_NAMES), 3))
-    for j, (ax, name) in enumerate(zip(axes, PARAM_NAMES, strict=True)):
-        ax.fill_between(k, mean[:, j] - 2 * std[:, j], mean[:, j] + 2 * std[:, j], alpha=0.25)
-        ax.plot(k, mean[:, j], "o-", ms=3, label="estimate ± 2σ")
-        if result.truth is not None:
-            ax.axhline(result.truth[j], color="k", ls="--", lw=1, label="truth")
-        lo, hi = PARAM_RANGES[name]
-        pad = 0.1 * (hi - lo)
-        ax.set_ylim(lo - pad, hi + pad)
-        ax.set_xlabel("push")
-        ax.set_title(labels[name], fontsize=9)
-        ax.set_xticks(k)
-    axes[0].legend(fontsize=7)
-    if title:
-        fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    plot_estimates_vs_push(
+        np.stack([e.mean for e in rows]),
+        np.stack([e.std for e in rows]),
+        result.truth,
+        path,
+        names=PARAM_NAMES,
+        title=title,
+    )

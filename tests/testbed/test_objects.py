@@ -158,3 +158,15 @@ def test_catalogue_shapes_match_mit_push_frames(name):
     a = Polygon(mit_polygon(name))
     b = footprint_from_shape(CATALOGUE_SHAPES[name]).polygon
     assert a.intersection(b).area / a.union(b).area > 0.99
+
+
+def test_novel_objects_are_valid_seeded_and_partly_unseen():
+    from pushtoknow.testbed.objects import NOVEL_SHAPES, novel_objects
+
+    a, b = novel_objects(6, seed=4), novel_objects(6, seed=4)
+    assert [o.to_dict() for o in a] == [o.to_dict() for o in b]
+    unseen = [o for o in a if isinstance(o.shape, dict)]
+    assert len(unseen) == 3 and all(o.name.split(":")[2] in NOVEL_SHAPES for o in unseen)
+    for o in a:  # continuous parameters, round-trip through JSON like the evaluation does
+        assert load_object_spec(o.to_json()).to_dict() == o.to_dict()
+        assert o.params.mass not in (0.2, 0.5, 0.8, 1.2)

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from pushtoknow.baselines.random_forest import features_from_records
 from pushtoknow.common.params import denormalise_params, param_scale
 from pushtoknow.evaluation.metrics import coverage, nrmse, product_nrmse
 
@@ -27,6 +28,8 @@ class HeldoutRun:
     truth: np.ndarray
     ids: list[str]
     seconds: list[float]
+    features_truth: np.ndarray | None = None  # (N, K, F) forest features, true poses
+    features_vision: np.ndarray | None = None  # (N, K, F) forest features, filtered poses
 
 
 def expected_product(mean_norm: np.ndarray, cov_norm: np.ndarray) -> float:
@@ -41,7 +44,6 @@ def _run_one(args) -> dict:
 
     from pushtoknow.inference.session import InferenceConfig, active_scorer, infer_object
     from pushtoknow.models.checkpoint import load_checkpoint
-    from pushtoknow.testbed.config import SimConfig
     from pushtoknow.testbed.executor import SimulatedExecutor
     from pushtoknow.testbed.objects import load_object_spec
 
@@ -52,7 +54,7 @@ def _run_one(args) -> dict:
     torch.set_num_threads(1)
     model = load_checkpoint(model_path)
     spec = load_object_spec(object_ref)
-    sim = SimConfig()
+    sim = model.sim_config
     cfg = InferenceConfig(pushes=pushes, policy=policy, num_sigma_points=sigma_points)
     scorer = (
         active_scorer(policy, sim, cfg.active_horizon_fraction)
@@ -65,8 +67,14 @@ def _run_one(args) -> dict:
     finally:
         ex.close()
     rows = [res.prior, *res.estimates]
+    camera = model.camera
+    poses = iter(res.poses)
     return {
-        "id": object_ref,
+        "features_truth": features_from_records(res.records, camera),
+        "features_vision": features_from_records(
+            res.records, camera, pose_fn=lambda _: np.asarray(next(poses), float)
+        ),
+        "id": spec.name if object_ref.lstrip().startswith("{") else object_ref,
         "mean": np.stack([e.mean for e in rows]),
         "std": np.stack([e.std for e in rows]),
         "product": np.array([expected_product(e.mean_norm, e.cov_norm) for e in rows]),
@@ -110,6 +118,8 @@ def evaluate_heldout(
         truth=np.stack([r["truth"] for r in out]),
         ids=[r["id"] for r in out],
         seconds=[r["seconds"] for r in out],
+        features_truth=np.stack([r["features_truth"] for r in out]),
+        features_vision=np.stack([r["features_vision"] for r in out]),
     )
 
 

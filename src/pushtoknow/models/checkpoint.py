@@ -100,6 +100,15 @@ class TrainedModel:
     inference: InferenceSettings = field(default_factory=InferenceSettings)
 
     @property
+    def sim_config(self):
+        """The testbed settings of the model's training data (push horizon, speed, camera):
+        inference pushes the same way. Models saved without them get the defaults."""
+        from pushtoknow.testbed.config import SimConfig
+
+        raw = self.info.get("sim_config")
+        return SimConfig() if raw is None else SimConfig.model_validate(raw)
+
+    @property
     def vision_only(self) -> bool:
         return self.variant == "v-ddf"
 

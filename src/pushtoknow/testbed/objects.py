@@ -15,6 +15,7 @@ Catalogue objects are addressable as ``catalogue:ID`` (ID in 0..824).
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 from dataclasses import dataclass, field
@@ -253,14 +254,46 @@ def catalogue_object(idx: int) -> ObjectSpec:
     return cat.objects[idx]
 
 
+# Shapes no training object has (the "novel shapes" of SPEC §3.7), sizes like the catalogue's.
+NOVEL_SHAPES: dict[str, dict] = {
+    "pentagon": {
+        "type": "polygon",
+        "vertices": [
+            [0.058 * math.cos(2 * math.pi * k / 5), 0.058 * math.sin(2 * math.pi * k / 5)]
+            for k in range(5)
+        ],
+    },
+    "trapezoid": {
+        "type": "polygon",
+        "vertices": [[-0.065, -0.045], [0.065, -0.045], [0.035, 0.045], [-0.035, 0.045]],
+    },
+    "ellip4": {"type": "ellipse", "a": 0.045, "b": 0.09},
+    "l_shape": {  # non-convex: decomposed into convex pieces for collision
+        "type": "polygon",
+        "vertices": [
+            [-0.055, -0.055],
+            [0.055, -0.055],
+            [0.055, -0.005],
+            [-0.005, -0.005],
+            [-0.005, 0.055],
+            [-0.055, 0.055],
+        ],
+    },
+}
+
+
 def sample_continuous_object(
     rng: np.random.Generator, shapes=None, max_tries: int = 1000
 ) -> ObjectSpec:
-    """A novel object: a catalogue shape with parameters drawn uniformly within the catalogue
-    ranges (rejection-sampled for physical validity)."""
+    """A novel object: a shape (default: a catalogue shape; `shapes` may name catalogue or
+    `NOVEL_SHAPES` ones) with parameters drawn uniformly within the catalogue ranges
+    (rejection-sampled for physical validity)."""
     names = list(shapes or CATALOGUE_SHAPES)
     shape = names[int(rng.integers(len(names)))]
-    fp = footprint_from_shape(CATALOGUE_SHAPES[shape])
+    if shape not in CATALOGUE_SHAPES and shape not in NOVEL_SHAPES:
+        raise ObjectSpecError("shape", shape, "not a catalogue or novel shape name")
+    shape_dict = CATALOGUE_SHAPES.get(shape) or NOVEL_SHAPES[shape]
+    fp = footprint_from_shape(shape_dict)
     for _ in range(max_tries):
         vals = [
             rng.uniform(*PARAM_RANGES[k]) for k in ("mass", "friction", "com_x", "com_y", "inertia")
@@ -270,5 +303,18 @@ def sample_continuous_object(
             validate_params(p, fp)
         except ObjectSpecError:
             continue
-        return ObjectSpec(shape=shape, params=p, name=f"continuous:{shape}")
+        spec_shape = shape if shape in CATALOGUE_SHAPES else shape_dict
+        return ObjectSpec(shape=spec_shape, params=p, name=f"continuous:{shape}")
     raise RuntimeError(f"no valid continuous parameters for {shape} in {max_tries} tries")
+
+
+def novel_objects(n: int, seed: int = 0) -> list[ObjectSpec]:
+    """n novel objects (SPEC §3.7): alternately an unseen shape (`NOVEL_SHAPES`) and a catalogue
+    shape, both with continuous parameters within the catalogue ranges; seeded."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for i in range(n):
+        pool = list(NOVEL_SHAPES) if i % 2 == 0 else list(CATALOGUE_SHAPES)
+        spec = sample_continuous_object(rng, pool)
+        out.append(dataclasses.replace(spec, name=f"novel:{i}:{spec.name.split(':', 1)[1]}"))
+    return out

@@ -198,7 +198,12 @@ def train_model(
             visnet,
             prior,
             camera,
-            info={"seed": seed, "push_speed": sim_cfg.push.speed, **_data_provenance(data)},
+            info={
+                "seed": seed,
+                "push_speed": sim_cfg.push.speed,
+                "sim_config": sim_cfg.model_dump(mode="json"),
+                **_data_provenance(data),
+            },
         )
         models = model.models
 

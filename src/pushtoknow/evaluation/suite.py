@@ -1,0 +1,384 @@
+"""The evaluation suite behind `pushtoknow evaluate` (SPEC §3.7).
+
+Protocol (what each number means):
+
+- **Object sets.** "heldout": the catalogue's held-out objects (`catalogue_split` test IDs, never
+  in any training set); "novel": `novel_objects` (unseen shapes and catalogue shapes, continuous
+  parameters). Every method sees the same objects.
+- **Methods.** For each trained model, inference with K pushes on every object: the first model
+  with every policy in `policies`, the others with the first policy (`<variant>:<policy>`).
+  `prior-mean`: the training objects' mean parameters. `forest`: the random-forest baseline
+  (Mavrakis-style features, ground-truth poses) trained on the `--data` pushes and applied to
+  the pushes the first model made under the first policy (same objects, same pushes), its
+  estimate after k pushes the mean of the first k per-push predictions. `forest-visnet`: the
+  same forest fed the filter's pose track (VisNet-driven) instead of ground-truth poses.
+- **Folds.** The objects of a set are split into `folds` disjoint groups (seeded); NRMSE is
+  computed per group and reported as mean ± std over groups. The learned models are trained
+  once on the catalogue's training split (retraining 3 variants × 5 folds does not fit on 2
+  CPU cores), so the spread measures the variation over evaluation objects, not over training
+  runs; the forest and the prior are refitted on the same training data as the models.
+- **Coverage**: share of (object, parameter) pairs whose truth lies in the 68% / 90% central
+  Gaussian interval of the method's final estimate (the forest's std is its tree spread).
+
+Inference runs are cached under OUT/cache (one .npz per set and method, keyed by the objects
+and settings), so an interrupted evaluation resumes where it stopped.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import platform
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from pydantic import Field
+
+from pushtoknow.baselines.random_forest import ForestBaseline, ForestConfig, features_from_dataset
+from pushtoknow.common.config import Config
+from pushtoknow.common.params import PARAM_NAMES
+from pushtoknow.evaluation.heldout import HeldoutRun, evaluate_heldout
+from pushtoknow.evaluation.metrics import PriorMeanPredictor, coverage, nrmse, product_nrmse
+
+PRIOR = "prior-mean"
+FOREST = "forest"
+FOREST_VISNET = "forest-visnet"
+POLICIES = ("uniform", "random", "active-kl", "active-entropy")
+
+
+class EvaluationConfig(Config):
+    """Settings of `run_evaluation`; loadable from YAML (`--config`)."""
+
+    heldout_objects: int | None = Field(None, ge=1, description="None: all held-out objects")
+    novel_objects: int = Field(20, ge=0)
+    pushes: int = Field(5, ge=1)
+    policies: tuple[str, ...] = POLICIES
+    folds: int = Field(5, ge=2)
+    seed: int = 0
+    workers: int = Field(2, ge=1)
+    sigma_points: int | None = Field(None, ge=10)
+    forest_trees: int = Field(200, ge=1)
+
+
+@dataclass
+class MethodRun:
+    """Estimates of one method on one set: mean, std (N, K+1, 5) SI after k = 0..K pushes,
+    product (N, K+1) E[μ·m] or None (then m̄·μ̄), truth (N, 5), ids (N,)."""
+
+    mean: np.ndarray
+    std: np.ndarray
+    truth: np.ndarray
+    ids: list[str]
+    product: np.ndarray | None = None
+    seconds_per_object: float | None = None
+
+
+def fold_indices(n: int, folds: int, seed: int) -> list[np.ndarray]:
+    """`folds` disjoint index groups covering range(n), seeded."""
+    if n < folds:
+        raise ValueError(f"{n} objects cannot be split into {folds} folds; use fewer folds")
+    perm = np.random.default_rng(seed).permutation(n)
+    return [np.sort(g) for g in np.array_split(perm, folds)]
+
+
+def summarise_method(run: MethodRun, folds: list[np.ndarray]) -> dict:
+    """NRMSE of the final estimate (mean ± std over folds, and over all objects), μ·m NRMSE,
+    68%/90% coverage, and NRMSE after every push k = 0..K (all objects)."""
+    k_last = run.mean.shape[1] - 1
+    m, s, t = run.mean[:, k_last], run.std[:, k_last], run.truth
+    prod = None if run.product is None else run.product[:, k_last]
+    per_fold = [nrmse(m[g], t[g]) for g in folds]
+    keys = [*PARAM_NAMES, "overall"]
+    cov68, cov90 = coverage(m, s, t, 0.68), coverage(m, s, t, 0.9)
+    per_push = []
+    for k in range(k_last + 1):
+        p = None if run.product is None else run.product[:, k]
+        row = nrmse(run.mean[:, k], t)
+        row["mu_m"] = product_nrmse(run.mean[:, k], t, p)
+        per_push.append(row)
+    fold_mu_m = [product_nrmse(m[g], t[g], None if prod is None else prod[g]) for g in folds]
+    return {
+        "nrmse": {k: float(np.mean([f[k] for f in per_fold])) for k in keys},
+        "nrmse_std": {k: float(np.std([f[k] for f in per_fold])) for k in keys},
+        "nrmse_all": nrmse(m, t),
+        "mu_m": float(np.mean(fold_mu_m)),
+        "mu_m_std": float(np.std(fold_mu_m)),
+        "coverage68": cov68["overall"],
+        "coverage90": cov90["overall"],
+        "coverage68_per_param": cov68,
+        "coverage90_per_param": cov90,
+        "per_push": per_push,
+        "objects": len(t),
+        "seconds_per_object": run.seconds_per_object,
+    }
+
+
+def heldout_object_refs(n: int | None) -> list[str]:
+    from pushtoknow.testbed.objects import catalogue_split
+
+    test = catalogue_split()[1]
+    return [f"catalogue:{i}" for i in (test if n is None else test[:n])]
+
+
+def novel_object_refs(n: int, seed: int) -> list[str]:
+    from pushtoknow.testbed.objects import novel_objects
+
+    return [o.to_json() for o in novel_objects(n, seed)]
+
+
+def _cache_key(model: Path, policy: str, objects: list[str], cfg: EvaluationConfig) -> str:
+    h = hashlib.sha256()
+    h.update(Path(model).read_bytes() if Path(model).is_file() else str(model).encode())
+    settings = [policy, cfg.pushes, cfg.seed, cfg.sigma_points, objects]
+    h.update(json.dumps(settings).encode())
+    return h.hexdigest()[:16]
+
+
+def _save_run(path: Path, key: str, run: HeldoutRun) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(".tmp.npz")
+    np.savez(
+        tmp,
+        key=key,
+        mean=run.mean,
+        std=run.std,
+        product=run.product,
+        truth=run.truth,
+        ids=np.array(run.ids),
+        seconds=np.array(run.seconds),
+        features_truth=run.features_truth,
+        features_vision=run.features_vision,
+    )
+    os.replace(tmp, path)  # atomic: a half-written cache is never read
+
+
+def _load_run(path: Path, key: str) -> HeldoutRun | None:
+    if not path.exists():
+        return None
+    with np.load(path) as f:
+        if str(f["key"]) != key:
+            return None
+        return HeldoutRun(
+            mean=f["mean"],
+            std=f["std"],
+            product=f["product"],
+            truth=f["truth"],
+            ids=[str(i) for i in f["ids"]],
+            seconds=f["seconds"].tolist(),
+            features_truth=f["features_truth"],
+            features_vision=f["features_vision"],
+        )
+
+
+def _inference_run(
+    model: Path, policy: str, objects: list[str], cfg: EvaluationConfig, cache: Path, progress
+) -> HeldoutRun:
+    key = _cache_key(model, policy, objects, cfg)
+    cached = _load_run(cache, key)
+    if cached is not None:
+        return cached
+    run = evaluate_heldout(
+        model,
+        objects,
+        cfg.pushes,
+        policy,
+        cfg.seed,
+        cfg.workers,
+        sigma_points=cfg.sigma_points,
+        progress=progress,
+    )
+    _save_run(cache, key, run)
+    return run
+
+
+def _forest_run(forest: ForestBaseline, features: np.ndarray, base: HeldoutRun, prior) -> MethodRun:
+    """Forest estimates after k = 0..K pushes (k = 0: the prior mean) on base's pushes."""
+    means, stds = [], []
+    p_mean, p_std = prior.predict(1)
+    for f in features:
+        m, s = forest.predict_object(f)
+        means.append(np.concatenate([p_mean, m]))
+        stds.append(np.concatenate([p_std, s]))
+    return MethodRun(np.stack(means), np.stack(stds), base.truth, base.ids)
+
+
+def _variant_names(models: list[Path]) -> list[str]:
+    from pushtoknow.models.checkpoint import load_checkpoint
+
+    names: list[str] = []
+    for m in models:
+        v = load_checkpoint(m).variant
+        names.append(v if v not in names else f"{v}#{len(names)}")
+    return names
+
+
+def machine_description() -> dict:
+    import torch
+
+    return {
+        "platform": platform.platform(),
+        "processor": platform.processor() or platform.machine(),
+        "cpus": os.cpu_count(),
+        "python": platform.python_version(),
+        "torch": torch.__version__,
+    }
+
+
+def run_evaluation(
+    data: Path,
+    models: list[Path],
+    cfg: EvaluationConfig,
+    out: Path,
+    progress=None,
+    echo=None,
+) -> dict:
+    """Evaluate `models` (checkpoint paths; the first is the primary one) and the baselines on
+    the held-out and novel sets; returns the results dict (also written to OUT/results.json).
+    progress(description, total) → advance callable; echo(str) for status lines."""
+    from pushtoknow.models.checkpoint import load_checkpoint
+
+    if not models:
+        raise ValueError("evaluate needs at least one model (--models)")
+    unknown = [p for p in cfg.policies if p not in POLICIES]
+    if unknown or not cfg.policies:
+        raise ValueError(f"unknown policies {unknown}; choose from {list(POLICIES)}")
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    say = echo or (lambda _: None)
+    names = _variant_names(models)
+
+    say(f"forest: features of the training pushes in {data}")
+    X, Y, obj, _ = features_from_dataset(data)
+    forest = ForestBaseline(ForestConfig(n_estimators=cfg.forest_trees, seed=cfg.seed)).fit(X, Y)
+    _, first = np.unique(obj, return_index=True)
+    prior = PriorMeanPredictor().fit(Y[first])
+
+    sets = {"heldout": heldout_object_refs(cfg.heldout_objects)}
+    if cfg.novel_objects:
+        sets["novel"] = novel_object_refs(cfg.novel_objects, cfg.seed)
+    results: dict = {"sets": {}}
+    runs_for_figures: dict[str, dict[str, MethodRun]] = {}
+    for set_name, objects in sets.items():
+        folds = fold_indices(len(objects), cfg.folds, cfg.seed)
+        methods: dict[str, MethodRun] = {}
+        for i, (model, name) in enumerate(zip(models, names)):
+            for policy in cfg.policies if i == 0 else cfg.policies[:1]:
+                method = f"{name}:{policy}"
+                say(f"{set_name}: {method} on {len(objects)} objects")
+                adv = progress(f"{set_name} {method}", len(objects)) if progress else None
+                cache = out / "cache" / set_name / f"{method.replace(':', '_')}.npz"
+                run = _inference_run(model, policy, objects, cfg, cache, adv)
+                methods[method] = MethodRun(
+                    run.mean,
+                    run.std,
+                    run.truth,
+                    run.ids,
+                    run.product,
+                    float(np.median(run.seconds)),
+                )
+                if i == 0 and policy == cfg.policies[0]:
+                    base = run
+        n = len(objects)
+        p_mean, p_std = prior.predict(n)
+        k1 = cfg.pushes + 1
+        methods[PRIOR] = MethodRun(
+            np.repeat(p_mean[:, None], k1, 1),
+            np.repeat(p_std[:, None], k1, 1),
+            base.truth,
+            base.ids,
+        )
+        methods[FOREST] = _forest_run(forest, base.features_truth, base, prior)
+        methods[FOREST_VISNET] = _forest_run(forest, base.features_vision, base, prior)
+        results["sets"][set_name] = {
+            "objects": base.ids,
+            "folds": cfg.folds,
+            "methods": {k: summarise_method(r, folds) for k, r in methods.items()},
+        }
+        runs_for_figures[set_name] = methods
+    results["methods"] = results["sets"]["heldout"]["methods"]
+    results["primary"] = f"{names[0]}:{cfg.policies[0]}"
+    results["config"] = cfg.model_dump(mode="json")
+    results["data"] = {"path": str(data), "pushes": int(len(X)), "objects": int(len(first))}
+    results["models"] = [
+        {"name": n, "path": str(m), "info": load_checkpoint(m).info} for n, m in zip(names, models)
+    ]
+    results["machine"] = machine_description()
+    results["figures"] = write_figures(runs_for_figures, models, names, cfg, out / "figures")
+    tmp = out / "results.json.tmp"
+    tmp.write_text(json.dumps(results, indent=1, default=_json_default))
+    os.replace(tmp, out / "results.json")
+    return results
+
+
+def _json_default(o):
+    if isinstance(o, np.generic):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, Path):
+        return str(o)
+    raise TypeError(f"not JSON serialisable: {type(o).__name__}")
+
+
+def _run_dir(model: Path) -> Path:
+    model = Path(model)
+    return model.parent if model.is_file() else model
+
+
+def write_figures(
+    runs: dict[str, dict[str, MethodRun]],
+    models: list[Path],
+    names: list[str],
+    cfg: EvaluationConfig,
+    out: Path,
+) -> dict[str, str]:
+    """Fig. 5 (estimates vs push number, first held-out object, primary method), Fig. 4a
+    (learning curves of the models' end-to-end validation), NRMSE vs pushes per method, and the
+    calibration plot of the primary method. Returns {figure: path}."""
+    from pushtoknow.evaluation import figures as F
+
+    out.mkdir(parents=True, exist_ok=True)
+    held = runs["heldout"]
+    primary = held[f"{names[0]}:{cfg.policies[0]}"]
+    paths = {}
+    paths["fig5_estimates"] = str(
+        F.plot_estimates_vs_push(
+            primary.mean[0],
+            primary.std[0],
+            primary.truth[0],
+            out / "fig5_estimates.png",
+            title=f"{names[0]}:{cfg.policies[0]} on {primary.ids[0]}",
+        )
+    )
+    curves = {}
+    for m, n in zip(models, names):
+        csv = _run_dir(m) / "end_to_end.csv"
+        if csv.exists():
+            curve = F.read_curve(csv, "step", "val_param_rmse_mean")
+            if curve:
+                curves[n] = curve
+    if curves:
+        paths["fig4a_learning_curves"] = str(
+            F.plot_learning_curves(
+                curves,
+                out / "fig4a_learning_curves.png",
+                ylabel="validation parameter RMSE (normalised)",
+                title="End-to-end training",
+            )
+        )
+    per_method = {}
+    for method, r in held.items():
+        s = summarise_method(r, [np.arange(len(r.truth))])["per_push"]
+        per_method[method] = {
+            k: [(j, row[k], 0.0) for j, row in enumerate(s)] for k in [*PARAM_NAMES, "overall"]
+        }
+    paths["nrmse_vs_pushes"] = str(
+        F.plot_nrmse_vs_pushes(per_method, out / "nrmse_vs_pushes.png", title="held-out objects")
+    )
+    k_last = primary.mean.shape[1] - 1
+    cal_path = out / "calibration.png"
+    F.plot_calibration(primary.mean[:, k_last], primary.std[:, k_last], primary.truth, cal_path)
+    paths["calibration"] = str(cal_path)
+    return paths

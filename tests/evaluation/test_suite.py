@@ -1,0 +1,95 @@
+"""The evaluation suite end to end on the tiny model (configs/evaluate-ci.yaml), and its
+fold statistics against hand computations."""
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from pushtoknow.cli.main import app
+from pushtoknow.evaluation.metrics import nrmse
+from pushtoknow.evaluation.suite import (
+    EvaluationConfig,
+    MethodRun,
+    fold_indices,
+    summarise_method,
+)
+from tiny_training import tiny_dataset, tiny_run
+
+CI_CONFIG = Path(__file__).parents[2] / "configs" / "evaluate-ci.yaml"
+runner = CliRunner()
+
+
+def test_fold_indices_partition_and_error():
+    folds = fold_indices(11, 3, seed=0)
+    assert sorted(np.concatenate(folds).tolist()) == list(range(11))
+    assert [len(f) for f in folds] == [4, 4, 3]
+    assert [f.tolist() for f in fold_indices(11, 3, 0)] == [f.tolist() for f in folds]
+    with pytest.raises(ValueError, match="2 objects cannot be split into 3 folds"):
+        fold_indices(2, 3, 0)
+
+
+def test_summary_matches_hand_computation():
+    rng = np.random.default_rng(1)
+    truth = rng.uniform([0.2, 0.35, -0.02, -0.02, 5e-4], [1.2, 0.7, 0.02, 0.03, 1.5e-3], (6, 5))
+    mean = np.stack([truth + rng.normal(0, 0.01, truth.shape) * k for k in (3, 2, 1)], 1)
+    std = np.full_like(mean, 0.01)
+    folds = [np.array([0, 1, 2]), np.array([3, 4, 5])]
+    s = summarise_method(MethodRun(mean, std, truth, [str(i) for i in range(6)]), folds)
+    per_fold = [nrmse(mean[g, -1], truth[g])["com_x"] for g in folds]
+    assert s["nrmse"]["com_x"] == pytest.approx(np.mean(per_fold))
+    assert s["nrmse_std"]["com_x"] == pytest.approx(np.std(per_fold))
+    assert s["nrmse_all"] == nrmse(mean[:, -1], truth)
+    assert [r["overall"] for r in s["per_push"]] == [
+        nrmse(mean[:, k], truth)["overall"] for k in range(3)
+    ]
+    inside = np.abs(truth - mean[:, -1]) <= 1.6448536 * std[:, -1]
+    assert s["coverage90"] == pytest.approx(inside.mean())
+
+
+def test_config_rejects_unknown_keys(tmp_path):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("folds: 5\nheldout: 3\n")
+    with pytest.raises(Exception, match="heldout"):
+        EvaluationConfig.from_yaml(bad)
+
+
+@pytest.mark.slow
+def test_evaluate_cli_reduced_config(tmp_path_factory, tmp_path):
+    data, run = tiny_dataset(tmp_path_factory), tiny_run(tmp_path_factory)
+    out = tmp_path / "report"
+    args = ["evaluate", "--data", str(data), "--models", str(run), "--out", str(out)]
+    args += ["--config", str(CI_CONFIG), "--json"]
+    result = runner.invoke(app, args)
+    assert result.exit_code == 0, result.output
+    printed = json.loads(result.stdout.strip().splitlines()[-1])
+    methods = printed["methods"]
+    expected = {"vt-addf:uniform", "vt-addf:active-kl", "prior-mean", "forest", "forest-visnet"}
+    assert set(methods) == expected
+    for name, m in methods.items():
+        assert set(m["nrmse"]) == {"mass", "friction", "com_x", "com_y", "inertia", "overall"}
+        assert all(np.isfinite(v) for v in m["nrmse"].values()), name
+        assert 0.0 <= m["coverage90"] <= 1.0
+        assert len(m["per_push"]) == 3  # prior + 2 pushes
+    # every method starts from the same prior-mean estimate at k = 0 except the filter's prior
+    assert methods["forest"]["per_push"][0] == methods["prior-mean"]["per_push"][0]
+    full = json.loads((out / "results.json").read_text())
+    assert set(full["sets"]) == {"heldout", "novel"}
+    assert len(full["sets"]["novel"]["objects"]) == 2
+    assert all((Path(p).stat().st_size > 1000) for p in full["figures"].values())
+    report = (out / "RESULTS.md").read_text()
+    assert "| forest-visnet |" in report and "Novel objects (2 objects)" in report
+    # a second run reads the cached inference runs and gives identical numbers
+    again = runner.invoke(app, args)
+    assert again.exit_code == 0, again.output
+    assert json.loads(again.stdout.strip().splitlines()[-1])["methods"] == methods
+
+
+def test_evaluate_cli_errors(tmp_path_factory, tmp_path):
+    data = tiny_dataset(tmp_path_factory)
+    args = ["evaluate", "--data", str(data), "--models", str(tmp_path / "nope")]
+    result = runner.invoke(app, [*args, "--out", str(tmp_path / "r")])
+    assert result.exit_code != 0
+    assert "nope" in result.output or "nope" in str(result.exception)
