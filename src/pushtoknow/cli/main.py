@@ -194,6 +194,66 @@ def evaluate_heldout_cmd(
     console.print(t)
 
 
+@app.command("evaluate")
+def evaluate_cmd(
+    data: Path = typer.Option(..., "--data", help="training dataset (forest + prior-mean fit)"),
+    models: list[str] = typer.Option(
+        ..., "--models", help="trained runs (RUN dir, model.pt or 'pretrained'); repeat the flag"
+    ),
+    folds: int = typer.Option(None, "--folds", min=2, help="default: the config's (5)"),
+    out: Path = typer.Option(..., "--out", help="report folder: results.json, RESULTS.md, figures"),
+    config: Path = typer.Option(None, "--config", help="YAML EvaluationConfig"),
+    seed: int = typer.Option(None, "--seed"),
+    workers: int = typer.Option(None, "--workers", min=1),
+    append: list[Path] = typer.Option(
+        [], "--append", help="markdown file appended to RESULTS.md (e.g. estimate-real's)"
+    ),
+    as_json: bool = typer.Option(False, "--json", help="print results.json to stdout"),
+):
+    """Prior mean, random forest (ground-truth and VisNet poses), each model and push policy on
+    held-out and novel objects: NRMSE (mean ± std over folds), coverage, figures, RESULTS.md."""
+    import shlex
+
+    from rich.progress import Progress
+
+    from pushtoknow.evaluation.report import render_report
+    from pushtoknow.evaluation.suite import EvaluationConfig, run_evaluation
+    from pushtoknow.pretrained import resolve_model_path
+
+    cfg = EvaluationConfig.from_yaml(config) if config else EvaluationConfig()
+    overrides = {"folds": folds, "seed": seed, "workers": workers}
+    cfg = cfg.model_copy(update={k: v for k, v in overrides.items() if v is not None})
+    cfg = EvaluationConfig.model_validate(cfg.model_dump())
+    refs = [r for m in models for r in m.split(",") if r]
+    paths = [resolve_model_path(r) for r in refs]
+    extra = [Path(a).read_text() for a in append]  # read first: fail before hours of work
+    with Progress(console=err_console) as bar:
+
+        def progress(desc: str, total: int):
+            task = bar.add_task(desc, total=total)
+            return lambda: bar.advance(task)
+
+        results = run_evaluation(
+            data, paths, cfg, out, progress=progress, echo=lambda m: err_console.print(m)
+        )
+    command = "pushtoknow " + shlex.join(sys.argv[1:]) if sys.argv[1:] else "pushtoknow evaluate"
+    (out / "RESULTS.md").write_text(render_report(results, command, extra))
+    if as_json:
+        print(json.dumps({k: results[k] for k in ("methods", "primary", "config")}))
+        return
+    from pushtoknow.evaluation.report import COLUMNS
+
+    for set_name, s in results["sets"].items():
+        t = Table(title=f"NRMSE after {cfg.pushes} pushes, {set_name} ({len(s['objects'])})")
+        for c in ["method", *COLUMNS, "μ·m", "cov90"]:
+            t.add_column(c, justify="right")
+        for name, m in s["methods"].items():
+            cells = [f"{m['nrmse'][k]:.3f}±{m['nrmse_std'][k]:.3f}" for k in COLUMNS]
+            t.add_row(name, *cells, f"{m['mu_m']:.3f}", f"{m['coverage90']:.2f}")
+        console.print(t)
+    console.print(f"wrote {out / 'results.json'}, {out / 'RESULTS.md'} and {out / 'figures'}")
+
+
 @app.command("import-mit")
 def import_mit(
     src: Path = typer.Argument(
@@ -207,6 +267,9 @@ def import_mit(
     ),
     speed: float | None = typer.Option(None, "--speed", help="push speed in mm/s (v=…)"),
     rate: float = typer.Option(10.0, "--rate", help="resampling rate (Hz)"),
+    as_speed: float | None = typer.Option(
+        None, "--as-speed", help="mm/s: time-rescale each push to this speed (quasi-static)"
+    ),
 ):
     """Convert MIT Push recordings into the project's dataset format (synthetic RGB-D)."""
     from pushtoknow.datasets.mit_import import import_mit_dataset
@@ -220,6 +283,7 @@ def import_mit(
             acceleration=acceleration,
             speed=None if speed is None else speed / 1000.0,
             rate=rate,
+            as_speed=None if as_speed is None else as_speed / 1000.0,
         )
     except PushToKnowError as e:
         _fail(e)
@@ -380,7 +444,6 @@ def run_inference(
     )
     from pushtoknow.models.checkpoint import load_checkpoint
     from pushtoknow.pretrained import resolve_model_path
-    from pushtoknow.testbed.config import SimConfig
     from pushtoknow.testbed.executor import SimulatedExecutor
     from pushtoknow.testbed.objects import load_object_spec
     from pushtoknow.viz import plot_estimates, save_push_strip
@@ -391,7 +454,7 @@ def run_inference(
     spec = load_object_spec(object_ref)
     truth = spec.params.as_array()
     show = Console(stderr=True) if as_json else console
-    sim_cfg = SimConfig()
+    sim_cfg = model.sim_config
     cfg = InferenceConfig(pushes=pushes, policy=policy, num_sigma_points=sigma_points)
     scorer = (
         active_scorer(policy, sim_cfg, cfg.active_horizon_fraction)
@@ -468,6 +531,11 @@ def demo(
     run_inference(
         model, f"catalogue:{demo_object_id()}", pushes, "uniform", seed, out, False, strip=True
     )
+
+
+from pushtoknow.cli.real import register as _register_real  # noqa: E402
+
+_register_real(app)
 
 
 def main() -> None:  # pragma: no cover

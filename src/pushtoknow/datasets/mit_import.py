@@ -42,6 +42,17 @@ Conventions of the converted data (all SI):
   force stream has samples there, else the first force reading (see `read_mit_push`).
 - **Pusher** = tip positions (shifted); the pad is rendered with the probe's radius.
 - The camera model (`CameraConfig`) is the simulator's default, 64 × 64 px, overhead at 0.75 m.
+- **Time rescaling (optional, ``as_speed``; off by default).** A model trained on pushes at
+  speed v_train sees, per 10 Hz step, a pusher displacement of v_train / rate. A recording at
+  v_file can be presented at v_train by slowing its clock down by s = v_file / v_train: the
+  push is resampled at rate·s Hz of recorded time, the samples are relabelled
+  ``time = k / rate`` (so the converted push lasts s times longer) and its action's speed is
+  v_file / s = v_train. Poses, pusher positions and forces are unchanged: each force sample
+  averages the recorded window [t_k - 1/(rate·s), t_k) of real time. This is exact only for
+  **quasi-static** pushing, whose motion and forces depend on the path, not on the rate; the
+  inertial part of the real force (m·a, free sliding after the pusher stops) is not rescaled.
+  s is stored per push as ``mit_time_scale`` (1 without rescaling) and the rule in
+  import.json (``time_scale_convention``).
 
 Shards are written one at a time, atomically, with the per-push MIT attributes added before the
 final rename (``mit_file``, ``mit_shift``, ``mit_t0``, ``mit_force_offset``, ``mit_friction``,
@@ -71,6 +82,7 @@ from pushtoknow.datasets.mit_push import (
     find_mit_push_files,
     mit_object,
     mit_polygon,
+    parse_mit_filename,
     read_mit_push,
 )
 from pushtoknow.datasets.shards import (
@@ -91,6 +103,7 @@ __all__ = [
     "IMPORT_VERSION",
     "MIN_DIRECTION_DISPLACEMENT",
     "TACTILE_CONVENTION",
+    "TIME_SCALE_CONVENTION",
     "MitRenderer",
     "convert_push",
     "import_mit_dataset",
@@ -128,6 +141,12 @@ TACTILE_CONVENTION = (
     "[t_k - 1/rate, t_k) (the window ending at t_k, as in the simulator); sample 0: raw samples "
     "before t_start if any, else the first reading; contact = |F| > 0.5 N; mit_contact_span = "
     "(first, last) sample with contact"
+)
+TIME_SCALE_CONVENTION = (
+    "as_speed v_target given: per push s = v_file / v_target; the recording is resampled at "
+    "rate * s Hz of recorded time and relabelled time = k / rate, the action's speed = "
+    "v_target; poses, pusher and forces unchanged (force windows of 1/(rate * s) s of real "
+    "time). Assumes quasi-static pushing (rate-independent). s stored as mit_time_scale"
 )
 _PART_SUFFIX = ".part"
 
@@ -202,11 +221,11 @@ def _contact_span(push: MitPush) -> tuple[int, int]:
     return (int(idx[0]), int(idx[-1])) if idx.size else (-1, -1)
 
 
-def push_action(push: MitPush, shift: np.ndarray | None = None) -> Push:
+def push_action(push: MitPush, shift: np.ndarray | None = None, time_scale: float = 1.0) -> Push:
     """The push a = (cp, pd, v) of a recording (see the module doc for the rules).
 
     cp: world (m), after adding `shift` (default `push_shift`); pd: rad; v: the file's speed
-    (m/s); profile "constant".
+    (m/s) divided by `time_scale` (see "Time rescaling" in the module doc); profile "constant".
     """
     shift = push_shift(push) if shift is None else np.asarray(shift, dtype=np.float64)
     tip, pose = push.tip_pose, push.object_pose
@@ -222,7 +241,8 @@ def push_action(push: MitPush, shift: np.ndarray | None = None) -> Push:
     tip_obj = _rot(pose[k, 2]).T @ (tip[k] - pose[k, :2])  # tip in the object frame at sample k
     cp_obj = _nearest_on_boundary(poly, tip_obj)
     cp = pose[0, :2] + _rot(pose[0, 2]) @ cp_obj + shift
-    return Push((float(cp[0]), float(cp[1])), float(direction), "constant", float(push.meta.speed))
+    speed = float(push.meta.speed) / float(time_scale)
+    return Push((float(cp[0]), float(cp[1])), float(direction), "constant", speed)
 
 
 # ============================================================================================
@@ -277,14 +297,18 @@ class MitRenderer:
         self.sim.close()
 
 
-def convert_push(push: MitPush, renderer: MitRenderer) -> tuple[PushRecord, dict]:
+def convert_push(
+    push: MitPush, renderer: MitRenderer, time_scale: float = 1.0
+) -> tuple[PushRecord, dict]:
     """One MIT push → (`PushRecord` in the shifted frame with rendered RGB-D, MIT attributes).
 
+    time_scale s: `push` was read at rate·s Hz; its times are multiplied by s and the speed
+    divided by s (module doc, "Time rescaling"); 1 leaves the recording as it is.
     The attributes (stored on the push's shard group): mit_file (str), mit_shift (2,) m,
     mit_t0 Unix s, mit_force_offset (2,) N, mit_friction (NaN if invalid),
     mit_contact_span (first, last) contact sample indices ((-1, -1) without contact; contact
     during [t_first - 1/rate, t_last), see `_contact_span`), mit_meta (JSON of the file-name
-    fields).
+    fields), mit_time_scale (s).
     """
     shift = push_shift(push)
     pose = push.object_pose.copy()
@@ -293,8 +317,8 @@ def convert_push(push: MitPush, renderer: MitRenderer) -> tuple[PushRecord, dict
     rgb, depth, s0 = renderer.render(pose, pusher)
     force = np.asarray(push.force, dtype=np.float64)
     record = PushRecord(
-        push=push_action(push, shift),
-        time=np.asarray(push.times, dtype=np.float64),
+        push=push_action(push, shift, time_scale),
+        time=np.asarray(push.times, dtype=np.float64) * float(time_scale),
         pose=pose,
         tactile=np.column_stack([force, push.contact.astype(np.float64)]),
         force_clean=force.copy(),
@@ -311,6 +335,7 @@ def convert_push(push: MitPush, renderer: MitRenderer) -> tuple[PushRecord, dict
         "mit_friction": np.nan if mu is None else mu,
         "mit_contact_span": np.array(_contact_span(push), dtype=np.int64),
         "mit_meta": json.dumps(_meta_dict(push.meta)),
+        "mit_time_scale": float(time_scale),
     }
     return record, attrs
 
@@ -407,13 +432,17 @@ def import_mit_dataset(
     rate: float = 10.0,
     objects_per_shard: int = 4,
     progress: bool = True,
+    as_speed: float | None = None,
 ) -> dict:
     """Convert (or resume converting) MIT Push files under `src` into shards in `out`.
 
     Filters as in `find_mit_push_files`: surface (e.g. "plywood"), shape (e.g. "rect1"),
     acceleration (the name's ``a``; 0 = constant speed) and **speed in m/s** (the file names and
     the CLI's ``--speed`` are in mm/s: pass ``speed_from_mm_per_s(v)``, i.e. v / 1000). The
-    paper's subset is ``acceleration=0`` and one speed. rate: resampling rate (Hz).
+    paper's subset is ``acceleration=0`` and one speed. rate: resampling rate (Hz) of the
+    converted clock. as_speed (m/s, default None = off): present every push as if pushed at
+    this speed by time rescaling (module doc, "Time rescaling"; quasi-static assumption), e.g.
+    the training data's push speed.
     One object = one (surface, shape) with all its selected pushes; `objects_per_shard`
     objects per shard. Peak memory ≈ one shard's rendered frames (≈ 28.7 kB per 64 × 64 frame).
     Resuming: finished shards whose fingerprint (relative file names, filters, rate, layout,
@@ -429,6 +458,8 @@ def import_mit_dataset(
         raise ValueError(f"objects_per_shard must be >= 1, got {objects_per_shard}")
     if not (math.isfinite(rate) and rate > 0):
         raise ValueError(f"rate must be a positive number of Hz, got {rate!r}")
+    if as_speed is not None and not (math.isfinite(as_speed) and as_speed > 0):
+        raise ValueError(f"as_speed must be a positive speed in m/s, got {as_speed!r}")
     filters = _filters(surface, shape, acceleration, speed)
     files = find_mit_push_files(src, surface, shape, acceleration, speed)
     if not files:
@@ -444,6 +475,8 @@ def import_mit_dataset(
         "sim": json.loads(sim_json),
         "fallback_friction": FALLBACK_FRICTION,
     }
+    if as_speed is not None:  # only then: imports without rescaling keep their fingerprint
+        settings["as_speed_m_per_s"] = float(as_speed)
     fingerprint = _fingerprint(src, plan, settings)
 
     out.mkdir(parents=True, exist_ok=True)
@@ -485,6 +518,8 @@ def import_mit_dataset(
                 for i, objs in enumerate(plan)
             ],
         }
+        if as_speed is not None:
+            info["time_scale_convention"] = TIME_SCALE_CONVENTION
         tmp = info_file.with_suffix(".json.tmp")
         tmp.write_text(json.dumps(info, indent=1))
         os.replace(tmp, info_file)
@@ -511,7 +546,7 @@ def import_mit_dataset(
             for i in todo:
                 episodes, object_attrs, push_attrs = [], [], []
                 for o in plan[i]:
-                    ep, oa, pa = _convert_object(o, src, rate, cfg, renderers, bar, task)
+                    ep, oa, pa = _convert_object(o, src, rate, cfg, renderers, bar, task, as_speed)
                     episodes.append(ep)
                     object_attrs.append(oa)
                     push_attrs.append(pa)
@@ -545,9 +580,11 @@ def _convert_object(
     renderers: dict[str, MitRenderer],
     bar,
     task,
+    as_speed: float | None = None,
 ) -> tuple[ObjectEpisode, dict, list[dict]]:
     """All pushes of one (surface, shape) object → episode, object attrs, per-push attrs."""
-    pushes = [read_mit_push(p, rate) for p in o["files"]]
+    scales = [_time_scale(p, as_speed) for p in o["files"]]
+    pushes = [read_mit_push(p, rate * s) for p, s in zip(o["files"], scales)]
     estimates = [push_friction(p) for p in pushes]
     valid = [m for m in estimates if m is not None]
     mu = float(np.median(valid)) if valid else FALLBACK_FRICTION
@@ -556,8 +593,8 @@ def _convert_object(
         renderers[o["shape"]] = MitRenderer(spec, cfg)
     renderer = renderers[o["shape"]]
     records, attrs = [], []
-    for path, push in zip(o["files"], pushes):
-        rec, pa = convert_push(push, renderer)
+    for path, push, s in zip(o["files"], pushes, scales):
+        rec, pa = convert_push(push, renderer, s)
         pa["mit_file"] = str(path.relative_to(src))
         records.append(rec)
         attrs.append(pa)
@@ -569,3 +606,13 @@ def _convert_object(
         "friction_source": source,
     }
     return ObjectEpisode(spec, o["object_index"], records), object_attrs, attrs
+
+
+def _time_scale(path: Path, as_speed: float | None) -> float:
+    """s = v_file / as_speed (1 when as_speed is None); `DatasetError` for a file at speed 0."""
+    if as_speed is None:
+        return 1.0
+    v = parse_mit_filename(path).speed
+    if not v > 0:
+        raise DatasetError(path, f"speed {v} m/s: cannot rescale a push to {as_speed} m/s")
+    return v / as_speed
