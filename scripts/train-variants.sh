@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # Train the ablation variants VT-JDF and V-DDF on the shipped model's data (recipe of
 # scripts/train-pretrained.sh: 400 catalogue-train objects × 4 pushes, data seed 1), with the
-# shipped model's config and its VisNet (so the three variants differ only in the filter).
-# ~15 min each on 2 cores. Usage: bash scripts/train-variants.sh [WORKDIR] (default runs/pretrained)
+# shipped model's recipe without its (ineffective) end-to-end stage, configs/variants.yaml, and
+# its VisNet, so the three variants differ only in the filter.
+# ~8 min each on 2 cores. Usage: bash scripts/train-variants.sh [WORKDIR] (default runs/pretrained)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
@@ -14,7 +15,7 @@ WORK="${1:-runs/pretrained}"
 for v in vt-jdf v-ddf; do
     if [ ! -f "$WORK/$v/model.pt" ]; then
         .venv/bin/pushtoknow train --data "$WORK/data" --out "$WORK/$v" --variant "$v" \
-            --config configs/pretrained-vt-addf.yaml --seed 0 \
+            --config configs/variants.yaml --seed 0 \
             --visnet-from src/pushtoknow/pretrained/vt-addf
     fi
 done

@@ -116,10 +116,22 @@ def summarise_method(run: MethodRun, folds: list[np.ndarray]) -> dict:
 
 
 def heldout_object_refs(n: int | None) -> list[str]:
-    from pushtoknow.testbed.objects import catalogue_split
+    """The held-out catalogue objects (`catalogue_split` test IDs); n of them taken round-robin
+    over the shapes, so a subset keeps every shape (None: all)."""
+    from pushtoknow.testbed.objects import build_catalogue, catalogue_split
 
     test = catalogue_split()[1]
-    return [f"catalogue:{i}" for i in (test if n is None else test[:n])]
+    objects = build_catalogue().objects
+    by_shape: dict[str, list[int]] = {}
+    for i in test:
+        by_shape.setdefault(objects[i].shape, []).append(i)
+    order = [
+        ids[j]
+        for j in range(max(map(len, by_shape.values())))
+        for ids in by_shape.values()
+        if j < len(ids)
+    ]
+    return [f"catalogue:{i}" for i in (order if n is None else order[:n])]
 
 
 def novel_object_refs(n: int, seed: int) -> list[str]:
