@@ -52,8 +52,10 @@ def write_shard(
     fingerprint: str,
     shard_index: int,
     sim_config_json: str,
+    attrs: dict | None = None,
 ) -> None:
-    """Write a shard atomically (temp file, fsync, rename)."""
+    """Write a shard atomically (temp file, fsync, rename). `attrs`: extra root attributes
+    (e.g. the push policy and model of `pushtoknow collect`)."""
     path = Path(path)
     tmp = path.with_suffix(".h5.tmp")
     with h5py.File(tmp, "w") as f:
@@ -65,6 +67,7 @@ def write_shard(
             sim_config=sim_config_json,
             complete=False,
         )
+        f.attrs.update(attrs or {})
         objs = f.create_group("objects")
         for ep in episodes:
             g = objs.create_group(str(ep.object_index))

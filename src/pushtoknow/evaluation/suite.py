@@ -364,22 +364,25 @@ def write_figures(
             title=f"{names[0]}:{cfg.policies[0]} on {primary.ids[0]}",
         )
     )
-    curves = {}
-    for m, n in zip(models, names):
-        csv = _run_dir(m) / "end_to_end.csv"
-        if csv.exists():
-            curve = F.read_curve(csv, "step", "val_param_rmse_mean")
-            if curve:
+    # Fig. 4a: validation curves of each model's training stages (supervised warm-up: process
+    # NLL, common to all variants; end to end: parameter RMSE after a push, where it ran)
+    stages = (
+        ("fig4a_supervised", "supervised.csv", "val_process_nll", "validation process NLL"),
+        ("fig4a_end_to_end", "end_to_end.csv", "val_param_rmse_mean", "validation parameter RMSE"),
+    )
+    for fig, csv_name, column, ylabel in stages:
+        curves = {}
+        for m, n in zip(models, names):
+            csv = _run_dir(m) / csv_name
+            curve = F.read_curve(csv, "step", column) if csv.exists() else []
+            if len(curve) > 1:
                 curves[n] = curve
-    if curves:
-        paths["fig4a_learning_curves"] = str(
-            F.plot_learning_curves(
-                curves,
-                out / "fig4a_learning_curves.png",
-                ylabel="validation parameter RMSE (normalised)",
-                title="End-to-end training",
+        if curves:
+            paths[fig] = str(
+                F.plot_learning_curves(
+                    curves, out / f"{fig}.png", ylabel=ylabel, title=f"{csv_name[:-4]} stage"
+                )
             )
-        )
     per_method = {}
     for method, r in held.items():
         s = summarise_method(r, [np.arange(len(r.truth))])["per_push"]

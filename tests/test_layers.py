@@ -1,0 +1,62 @@
+"""Lower layers never import higher ones (README "Layout"): every `pushtoknow.X` import in a
+module of package P, lazy imports inside functions included, must name a layer ≤ P's."""
+
+import ast
+from pathlib import Path
+
+import pushtoknow
+
+# rank of each subpackage / top-level module; equal ranks may import each other
+RANKS = {
+    "common": 0,
+    "pretrained": 0,
+    "geometry": 1,
+    "testbed": 2,
+    "datasets": 3,
+    "filters": 3,
+    "models": 4,
+    "active": 5,
+    "baselines": 5,
+    "training": 6,
+    "inference": 7,
+    "collection": 7.5,  # runs inference to collect training data, trains models
+    "evaluation": 8,
+    "bench": 9,
+    "viz": 9,
+    "cli": 10,
+}
+ROOT = Path(pushtoknow.__file__).parent
+
+
+def _layer(dotted: str) -> str | None:
+    parts = dotted.split(".")
+    return parts[1] if len(parts) > 1 and parts[0] == "pushtoknow" else None
+
+
+def _imports(path: Path):
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            yield from (a.name for a in node.names)
+        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            yield node.module
+
+
+def test_every_layer_is_ranked():
+    found = {p.stem if p.is_file() else p.name for p in ROOT.iterdir()}
+    found = {f for f in found if not f.startswith("_") and f not in ("py",)}
+    missing = {f for f in found if f not in RANKS and (ROOT / f).is_dir()}
+    assert not missing, f"rank these packages in RANKS: {missing}"
+
+
+def test_no_module_imports_a_higher_layer():
+    bad = []
+    for path in ROOT.rglob("*.py"):
+        rel = path.relative_to(ROOT)
+        own = rel.parts[0] if len(rel.parts) > 1 else rel.stem
+        if own not in RANKS:
+            continue
+        for name in _imports(path):
+            other = _layer(name)
+            if other in RANKS and RANKS[other] > RANKS[own]:
+                bad.append(f"{rel} imports {name}")
+    assert not bad, "\n".join(bad)
