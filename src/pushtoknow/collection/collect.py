@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import multiprocessing as mp
 import os
 import shutil
 from pathlib import Path
@@ -38,12 +37,16 @@ from pydantic import Field
 
 from pushtoknow.common.config import Config
 from pushtoknow.common.errors import DatasetError
-from pushtoknow.datasets.generate import GENERATION_FILE, select_objects
+from pushtoknow.datasets.generate import (
+    GENERATION_FILE,
+    prepare_dataset_dir,
+    select_objects,
+    write_pending_shards,
+)
 from pushtoknow.datasets.shards import (
     ObjectEpisode,
     list_shards,
     open_shard,
-    shard_is_finished,
     shard_path,
     write_shard,
 )
@@ -216,64 +219,32 @@ def collect_dataset(
         sim=model.sim_config,
     )
     collection_objects(cfg)  # validate early, in the parent
-    out.mkdir(parents=True, exist_ok=True)
-    gen_file = out / GENERATION_FILE
-    if gen_file.exists():
-        old = json.loads(gen_file.read_text())
-        if old.get("fingerprint") != cfg.fingerprint():
-            raise DatasetError(
-                out,
-                "holds a dataset made with other settings, policy or model "
-                f"(see {GENERATION_FILE}); use another --out directory",
-            )
-    else:
-        record = {
-            "fingerprint": cfg.fingerprint(),
-            "kind": "collect",
-            "config": cfg.model_dump(mode="json"),
-        }
-        tmp = gen_file.with_suffix(".json.tmp")
-        tmp.write_text(json.dumps(record, indent=1))
-        os.replace(tmp, gen_file)
-    for stale in out.glob("*.h5.tmp"):
-        stale.unlink()
+    prepare_dataset_dir(
+        out,
+        cfg.fingerprint(),
+        {"kind": "collect", "config": cfg.model_dump(mode="json")},
+        "made with other settings, policy or model",
+    )
     k = cfg.objects_per_shard
     plan = [list(range(s, min(s + k, cfg.objects))) for s in range(0, cfg.objects, k)]
-    todo = [
-        (str(out), i, idx, cfg.model_dump_json())
-        for i, idx in enumerate(plan)
-        if not shard_is_finished(shard_path(out, i), cfg.fingerprint())
-    ]
-    skipped = len(plan) - len(todo)
-
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
-
-    with Progress(
-        "[progress.description]{task.description}",
-        BarColumn(),
-        MofNCompleteColumn(),
-        TimeRemainingColumn(),
-        disable=not progress,
-    ) as bar:
-        task = bar.add_task(
-            f"collecting ({policy}; {skipped} shards already done)",
-            total=sum(len(t[2]) for t in todo),
+    _MODELS.clear()
+    _MODELS[cfg.model_sha256] = model  # the serial path reuses the loaded model
+    try:
+        written, skipped = write_pending_shards(
+            out,
+            plan,
+            cfg.fingerprint(),
+            cfg.model_dump_json(),
+            _collect_shard,
+            workers,
+            f"collecting ({policy})",
+            progress,
+            initializer=_worker_init,
         )
-        if workers <= 1 or len(todo) <= 1:
-            _MODELS.clear()
-            _MODELS[cfg.model_sha256] = model
-            try:
-                for t in todo:
-                    bar.advance(task, _collect_shard(t)[1])
-            finally:
-                _MODELS.clear()
-        else:
-            ctx = mp.get_context("spawn")  # fresh GL contexts; no forked MuJoCo state
-            with ctx.Pool(min(workers, len(todo)), initializer=_worker_init) as pool:
-                for _, n in pool.imap_unordered(_collect_shard, todo):
-                    bar.advance(task, n)
+    finally:
+        _MODELS.clear()
     return {
-        "shards_written": len(todo),
+        "shards_written": written,
         "shards_skipped": skipped,
         "objects": cfg.objects,
         "pushes": cfg.objects * cfg.pushes,

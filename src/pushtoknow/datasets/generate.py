@@ -9,6 +9,7 @@ from __future__ import annotations
 import hashlib
 import json
 import multiprocessing as mp
+import os
 from pathlib import Path
 from typing import Literal
 
@@ -123,38 +124,47 @@ def shard_plan(cfg: GenerationConfig) -> list[list[int]]:
     return [list(range(s, min(s + k, cfg.objects))) for s in range(0, cfg.objects, k)]
 
 
-def generate_dataset(
-    out: Path, cfg: GenerationConfig, workers: int = 1, progress: bool = True
-) -> dict:
-    """Generate (or resume) a dataset in `out`. Returns counts of written and skipped shards."""
-    out = Path(out)
+def prepare_dataset_dir(out: Path, fingerprint: str, record: dict, refusal: str) -> None:
+    """Create `out` (or accept it when its GENERATION_FILE has this fingerprint; else a
+    DatasetError "holds a dataset `refusal` …"), write the provenance record atomically on first
+    use, and drop temp files left by an interrupted run."""
     out.mkdir(parents=True, exist_ok=True)
-    select_objects(cfg.objects_from, cfg.objects, cfg.seed)  # validate early, in the parent
     gen_file = out / GENERATION_FILE
     if gen_file.exists():
         old = json.loads(gen_file.read_text())
-        if old.get("fingerprint") != cfg.fingerprint():
+        if old.get("fingerprint") != fingerprint:
             raise DatasetError(
                 out,
-                "holds a dataset generated with other settings "
-                f"(see {GENERATION_FILE}); use another --out directory",
+                f"holds a dataset {refusal} (see {GENERATION_FILE}); use another --out directory",
             )
     else:
-        gen_file.write_text(
-            json.dumps(
-                {"fingerprint": cfg.fingerprint(), "config": cfg.model_dump(mode="json")}, indent=1
-            )
-        )
+        tmp = gen_file.with_suffix(".json.tmp")
+        tmp.write_text(json.dumps({"fingerprint": fingerprint, **record}, indent=1))
+        os.replace(tmp, gen_file)
     for stale in out.glob("*.h5.tmp"):
         stale.unlink()
-    plan = shard_plan(cfg)
+
+
+def write_pending_shards(
+    out: Path,
+    plan: list[list[int]],
+    fingerprint: str,
+    cfg_json: str,
+    make_shard,
+    workers: int,
+    description: str,
+    progress: bool = True,
+    initializer=None,
+) -> tuple[int, int]:
+    """Write the shards of `plan` (object indices per shard) not yet finished, with
+    make_shard((out, shard index, indices, cfg_json)) → (shard index, objects), in a spawn pool
+    when workers > 1; a progress bar counts objects. Returns (written, skipped)."""
     todo = [
-        (str(out), i, idx, cfg.model_dump_json())
+        (str(out), i, idx, cfg_json)
         for i, idx in enumerate(plan)
-        if not shard_is_finished(shard_path(out, i), cfg.fingerprint())
+        if not shard_is_finished(shard_path(out, i), fingerprint)
     ]
     skipped = len(plan) - len(todo)
-    n_objects = sum(len(t[2]) for t in todo)
 
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
 
@@ -165,13 +175,40 @@ def generate_dataset(
         TimeRemainingColumn(),
         disable=not progress,
     ) as bar:
-        task = bar.add_task(f"simulating ({skipped} shards already done)", total=n_objects)
+        task = bar.add_task(
+            f"{description} ({skipped} shards already done)", total=sum(len(t[2]) for t in todo)
+        )
         if workers <= 1 or len(todo) <= 1:
             for t in todo:
-                bar.advance(task, _make_shard(t)[1])
+                bar.advance(task, make_shard(t)[1])
         else:
             ctx = mp.get_context("spawn")  # fresh GL contexts; no forked MuJoCo state
-            with ctx.Pool(min(workers, len(todo))) as pool:
-                for _, n in pool.imap_unordered(_make_shard, todo):
+            with ctx.Pool(min(workers, len(todo)), initializer=initializer) as pool:
+                for _, n in pool.imap_unordered(make_shard, todo):
                     bar.advance(task, n)
-    return {"shards_written": len(todo), "shards_skipped": skipped, "objects": cfg.objects}
+    return len(todo), skipped
+
+
+def generate_dataset(
+    out: Path, cfg: GenerationConfig, workers: int = 1, progress: bool = True
+) -> dict:
+    """Generate (or resume) a dataset in `out`. Returns counts of written and skipped shards."""
+    out = Path(out)
+    select_objects(cfg.objects_from, cfg.objects, cfg.seed)  # validate early, in the parent
+    prepare_dataset_dir(
+        out,
+        cfg.fingerprint(),
+        {"config": cfg.model_dump(mode="json")},
+        "generated with other settings",
+    )
+    written, skipped = write_pending_shards(
+        out,
+        shard_plan(cfg),
+        cfg.fingerprint(),
+        cfg.model_dump_json(),
+        _make_shard,
+        workers,
+        "simulating",
+        progress,
+    )
+    return {"shards_written": written, "shards_skipped": skipped, "objects": cfg.objects}

@@ -193,6 +193,17 @@ def plot_estimates_vs_push(
     return _save(fig, path, dpi)
 
 
+def _finish_curves(fig, ax, xlabel: str, ylabel: str, title: str, path, dpi: int) -> Path:
+    """Labels, grid, legend and title of a one-panel curve plot; writes it."""
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    if title:
+        ax.set_title(title, fontsize=10)
+    return _save(fig, path, dpi)
+
+
 # ----------------------------------------------------------------------------------------------
 # Fig. 4a: learning curves
 
@@ -254,13 +265,7 @@ def plot_learning_curves(
             label=label,
         )
     ax.set_yscale(yscale)
-    ax.set_xlabel(xlabel)
-    ax.set_ylabel(ylabel)
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
-    if title:
-        ax.set_title(title, fontsize=10)
-    return _save(fig, path, dpi)
+    return _finish_curves(fig, ax, xlabel, ylabel, title, path, dpi)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -302,13 +307,7 @@ def plot_learning_efficiency(
             label=label,
         )
     ax.set_xscale(xscale)
-    ax.set_xlabel(xlabel)
-    ax.set_ylabel(ylabel)
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
-    if title:
-        ax.set_title(title, fontsize=10)
-    return _save(fig, path, dpi)
+    return _finish_curves(fig, ax, xlabel, ylabel, title, path, dpi)
 
 
 # ----------------------------------------------------------------------------------------------

@@ -216,12 +216,10 @@ def _forest_run(forest: ForestBaseline, features: np.ndarray, base: HeldoutRun, 
     return MethodRun(np.stack(means), np.stack(stds), base.truth, base.ids)
 
 
-def _variant_names(models: list[Path]) -> list[str]:
-    from pushtoknow.models.checkpoint import load_checkpoint
-
+def _variant_names(variants: list[str]) -> list[str]:
+    """Method-name prefixes: the variant, suffixed by its position when repeated."""
     names: list[str] = []
-    for m in models:
-        v = load_checkpoint(m).variant
+    for v in variants:
         names.append(v if v not in names else f"{v}#{len(names)}")
     return names
 
@@ -259,7 +257,8 @@ def run_evaluation(
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     say = echo or (lambda _: None)
-    names = _variant_names(models)
+    loaded = [load_checkpoint(m) for m in models]  # CheckpointError before any work
+    names = _variant_names([m.variant for m in loaded])
 
     say(f"forest: features of the training pushes in {data}")
     X, Y, obj, _ = features_from_dataset(data)
@@ -314,7 +313,7 @@ def run_evaluation(
     results["config"] = cfg.model_dump(mode="json")
     results["data"] = {"path": str(data), "pushes": int(len(X)), "objects": int(len(first))}
     results["models"] = [
-        {"name": n, "path": str(m), "info": load_checkpoint(m).info} for n, m in zip(names, models)
+        {"name": n, "path": str(m), "info": c.info} for n, m, c in zip(names, models, loaded)
     ]
     results["machine"] = machine_description()
     results["figures"] = write_figures(runs_for_figures, models, names, cfg, out / "figures")
