@@ -157,3 +157,12 @@ def test_infer_bad_policy(tmp_path):
     )  # fmt: skip
     assert result.exit_code == 2
     assert "--policy must be one of" in result.stderr and "active-entropy" in result.stderr
+
+
+def test_infer_bad_profile(tmp_path):
+    result = invoke(
+        "infer", "--model", tmp_path, "--object", "catalogue:117", "--profiles", "constant,fast",
+        "--out", tmp_path / "X",
+    )  # fmt: skip
+    assert result.exit_code == 2
+    assert "--profiles" in result.stderr and "fast" in result.stderr and "release" in result.stderr

@@ -111,3 +111,22 @@ def test_action_map_peaks_at_contact_and_stretches_along_push():
     assert (row > 0.5).sum() > (col > 0.5).sum()
     fast = action_map(cp, torch.tensor([0.0]), torch.tensor([0.5]), CAM)[0, 0]
     assert (fast > 0.5).sum() > (m > 0.5).sum()
+
+
+def test_marker_mask_is_the_half_with_positive_object_x():
+    from pushtoknow.geometry.warp import marker_mask
+
+    cam = CAM
+    h, w = cam.height, cam.width
+    mask = torch.ones(2, 1, h, w)
+    pose0 = torch.tensor([[0.02, -0.01, 0.0], [0.0, 0.0, math.pi / 2]])
+    half = marker_mask(mask, pose0, cam)
+    assert half.shape == (2, 1, h, w)
+    u = torch.arange(w, dtype=torch.float32)
+    v = torch.arange(h, dtype=torch.float32)
+    xy = torch.as_tensor(cam.pixel_to_world(np.stack(np.meshgrid(u, v), -1)), dtype=torch.float32)
+    # θ0 = 0: pixels right of x = 0.02 m; θ0 = π/2: pixels above y = 0 (object +x = world +y)
+    torch.testing.assert_close(half[0, 0], (xy[..., 0] >= 0.02).float())
+    torch.testing.assert_close(half[1, 0], (xy[..., 1] >= 0).float())
+    # only inside S_0
+    assert marker_mask(torch.zeros(1, 1, h, w), pose0[:1], cam).sum() == 0

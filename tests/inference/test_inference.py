@@ -47,11 +47,11 @@ class ViewRecorder(SimulatedExecutor):
         return view
 
 
-def infer(model, spec, policy="uniform", seed=0, pushes=PUSHES):
+def infer(model, spec, policy="uniform", seed=0, pushes=PUSHES, profiles=("constant",)):
     ex = ViewRecorder(spec, SIM, seed=seed, recentre=True)
     try:
         ex.observe()  # as the CLI does: places the object, sets initial_pose
-        cfg = InferenceConfig(pushes=pushes, policy=policy, candidates=4)
+        cfg = InferenceConfig(pushes=pushes, policy=policy, candidates=4, profiles=profiles)
         scorer = active_scorer(policy, SIM) if policy.startswith("active") else None
         seen = []
         result = infer_object(
@@ -172,3 +172,49 @@ def test_estimator_start_belief(model):
     torch.testing.assert_close(cov[0, 3:, 3:], model.prior.cov)
     assert torch.all(cov[0, :3, 3:] == 0)
     assert est.num_sigma_points == SIGMA_POINTS
+
+
+def test_uniform_policy_cycles_through_the_speed_profiles(model, spec):
+    """With profiles (constant, release) uniform alternates them, each at its testbed speed;
+    the release push is executed with the release profile (the pad stops early)."""
+    result, _ = infer(model, spec, "uniform", seed=0, profiles=("constant", "release"))
+    pushes = [e.push for e in result.estimates]
+    assert [p.profile for p in pushes] == ["constant", "release"]
+    assert pushes[0].speed == SIM.push.speed and pushes[1].speed == SIM.push.release_peak_speed
+    constant, release = result.records
+    travel = lambda r: np.linalg.norm(r.pusher[-1] - r.pusher[0])  # noqa: E731
+    pad_speed = lambda r: np.linalg.norm(np.diff(r.pusher, axis=0), axis=1).max() * 10  # noqa: E731
+    assert pad_speed(constant) == pytest.approx(SIM.push.speed, rel=0.05)
+    assert pad_speed(release) > 5 * SIM.push.speed and travel(release) > travel(constant)
+    for k, e in enumerate(result.estimates):
+        check_estimate(e, k + 1)
+
+
+def test_choose_push_profiles_for_random_and_active():
+    from pushtoknow.inference.session import choose_push, profile_speeds
+    from pushtoknow.testbed.executor import SimulatedExecutor
+
+    ex = SimulatedExecutor(load_object_spec("catalogue:117"), SIM, seed=0, recentre=True)
+    try:
+        view = ex.observe()
+        speeds = profile_speeds(SIM)
+        both = ("constant", "release")
+        seen = []
+
+        def active(cands):
+            seen.extend(c.profile for c in cands)
+            return [c.profile for c in cands].index("release")
+
+        args = (view, ex.camera, 0, 5, ex.initial_pose)
+        push = choose_push("active-kl", *args, np.random.default_rng(0), speeds, 6, active, both)
+        assert push.profile == "release" and push.speed == speeds["release"]
+        assert seen == ["constant", "release"] * 3  # the policy chooses among both
+        drawn = {
+            choose_push("random", *args, np.random.default_rng(s), speeds, 6, None, both).profile
+            for s in range(12)
+        }
+        assert drawn == set(both)
+        only = choose_push("random", *args, np.random.default_rng(0), speeds, 6)
+        assert only.profile == "constant" and only.speed == speeds["constant"]
+    finally:
+        ex.close()

@@ -206,3 +206,13 @@ def test_resolve_model_path(tmp_path):
     assert resolve_model_path(str(tmp_path)) == tmp_path
     with pytest.raises(CheckpointError, match="no shipped model 'bogus'"):
         resolve_model_path("pretrained:bogus")
+
+
+def test_sim_config_of_models_saved_before_the_orientation_marker():
+    from pushtoknow.testbed.config import SimConfig, stored_sim_config
+
+    assert stored_sim_config(None).orientation_marker is False
+    old = SimConfig().model_dump(mode="json")
+    del old["orientation_marker"]
+    assert stored_sim_config(old).orientation_marker is False
+    assert stored_sim_config(SimConfig().model_dump_json()).orientation_marker is True

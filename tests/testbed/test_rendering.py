@@ -45,3 +45,44 @@ def test_depth_is_metric_and_rgb_shows_object():
     # The object is coloured differently from the table.
     assert np.abs(rec.rgb[0][rec.s0].mean(0) - rec.rgb[0][~rec.s0].mean(0)).sum() > 60
     assert rec.rgb.shape == (101, cam.height, cam.width, 3)
+
+
+@pytest.mark.parametrize(("shape", "theta"), [("ellip1", 2.0), ("rect1", -0.7), ("hex", 3.0)])
+def test_orientation_marker_shows_the_object_frame_x_axis(shape, theta):
+    """The dark decal covers the +x half of the object frame, so even a disc's θ is visible:
+    the direction from the object's centre to the dark pixels is θ."""
+    from pushtoknow.testbed.config import SimConfig
+
+    spec = ObjectSpec(shape=shape, params=ObjectParams(0.8, 0.5, 0.0, 0.0, 0.5e-3))
+    sim = PushSimulator(spec, SimConfig(orientation_marker=True))
+    sim.reset((0.0, 0.0, theta))
+    rec = sim.execute(Push((5.0, 5.0), 0.0), np.random.default_rng(0), render=True)
+    rgb = rec.rgb[0].astype(float)
+    dark = rec.s0 & (rgb.sum(-1) < 150)
+    assert 0.3 < dark.sum() / rec.s0.sum() < 0.7  # about half of the object
+    v, u = np.nonzero(dark)
+    xy = sim.camera.pixel_to_world(np.stack([u, v], -1)).mean(0)
+    assert abs(np.angle(np.exp(1j * (np.arctan2(xy[1], xy[0]) - theta)))) < np.radians(12)
+    # the decal belongs to the object: segmentation still covers the whole footprint
+    expected = rasterise_footprint(spec.footprint.vertices, rec.pose[0], sim.camera)
+    assert iou(rec.s0, expected) >= 0.8
+    sim.close()
+
+
+def test_orientation_marker_changes_pixels_not_physics():
+    from pushtoknow.testbed.config import SimConfig
+
+    spec = catalogue_object(500)
+    recs = []
+    for marker in (False, True):
+        sim = PushSimulator(spec, SimConfig(orientation_marker=marker))
+        sim.reset((0.0, 0.0, 0.3))
+        push = Push((-0.08, 0.01), 0.0)
+        recs.append(sim.execute(push, np.random.default_rng(3), render=True))
+        sim.close()
+    plain, marked = recs
+    np.testing.assert_array_equal(plain.pose, marked.pose)
+    np.testing.assert_array_equal(plain.tactile, marked.tactile)
+    np.testing.assert_array_equal(plain.s0, marked.s0)
+    assert not (plain.rgb[0][plain.s0].astype(float).sum(-1) < 150).any()
+    assert (marked.rgb[0][marked.s0].astype(float).sum(-1) < 150).any()

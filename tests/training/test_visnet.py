@@ -76,6 +76,27 @@ def test_crop_is_centred_on_reference(tiny):
     assert abs(u.float().mean() - 15.5) < 2 and abs(v.float().mean() - 15.5) < 2
 
 
+def test_marker_channel_matches_the_painted_marker(tiny):
+    """With the orientation marker the extra channel (expected marker at the reference) lies on
+    the image's dark pixels at the true pose, and on other pixels at a pose turned by π."""
+    from pushtoknow.training.pipeline import visnet_config_for
+
+    rgbd, mask0, pose, pose0, _ = load_frames(tiny, every=10)
+    camera, sim_cfg = dataset_camera(tiny)
+    assert sim_cfg.orientation_marker
+    cfg = visnet_config_for(VisNetTrainConfig(), sim_cfg)
+    assert cfg.net.marker_channel and cfg.net.in_channels == VisNetTrainConfig().net.in_channels + 1
+    x, s_ref = visnet_inputs(rgbd[:6], mask0[:6], pose0[:6], pose[:6], camera, 32, marker=True)
+    assert x.shape == (6, 6, 32, 32)
+    dark = (x[:, :3].sum(1) < 0.6 * 3 / 2).float()  # the decal is near black
+    expected = x[:, 5]
+    overlap = (dark * expected).sum() / expected.sum()
+    turned = pose[:6] + torch.tensor([0.0, 0.0, math.pi])
+    x_turned, _ = visnet_inputs(rgbd[:6], mask0[:6], pose0[:6], turned, camera, 32, marker=True)
+    overlap_turned = (dark * x_turned[:, 5]).sum() / x_turned[:, 5].sum()
+    assert overlap > 0.7 and overlap_turned < 0.3
+
+
 @pytest.mark.slow
 def test_visnet_learns_to_beat_its_reference(tiny):
     torch.manual_seed(0)

@@ -28,6 +28,22 @@ console = Console()
 err_console = Console(stderr=True, soft_wrap=True)
 
 
+PROFILES_HELP = "comma-separated speed profiles the policy may use: constant,release"
+
+
+def _profiles(text: str) -> tuple[str, ...]:
+    """'constant,release' → ("constant", "release"), each checked."""
+    from pushtoknow.testbed.push import PROFILES
+
+    names = tuple(p.strip() for p in text.split(",") if p.strip())
+    bad = [p for p in names if p not in PROFILES]
+    if not names or bad:
+        raise typer.BadParameter(
+            f"--profiles: unknown profile(s) {bad or text!r}; choose from {', '.join(PROFILES)}"
+        )
+    return names
+
+
 def _fail(e: Exception) -> None:
     err_console.print(f"[bold red]error:[/] {e}")
     raise typer.Exit(2)
@@ -138,31 +154,43 @@ def evaluate_heldout_cmd(
     workers: int = typer.Option(2, "--workers", min=1),
     out: Path = typer.Option(None, "--out", help="write the metrics JSON here"),
     as_json: bool = typer.Option(False, "--json"),
+    profiles: str = typer.Option("constant", "--profiles", help=PROFILES_HELP),
 ):
     """NRMSE after each of K pushes on held-out catalogue objects (the catalogue's test split),
     with the prior-mean predictor and the coverage of the 68% / 90% intervals."""
+    profile_names = _profiles(profiles)
     import numpy as np
     from rich.progress import Progress
 
     from pushtoknow.common.params import PARAM_NAMES
-    from pushtoknow.evaluation.heldout import evaluate_heldout, heldout_metrics
+    from pushtoknow.evaluation.heldout import (
+        evaluate_heldout,
+        heldout_metrics,
+        heldout_object_ids,
+    )
     from pushtoknow.pretrained import resolve_model_path
-    from pushtoknow.testbed.objects import catalogue_split
 
-    test_ids = catalogue_split()[1]
-    n = min(objects, len(test_ids))
-    ids = [f"catalogue:{i}" for i in np.random.default_rng(seed).permutation(test_ids)[:n]]
+    ids = heldout_object_ids(objects, seed)
+    n = len(ids)
     path = resolve_model_path(model)
     with Progress(console=err_console) as bar:
         task = bar.add_task("held-out objects", total=n)
         run = evaluate_heldout(
-            path, ids, pushes, policy, seed, workers, progress=lambda: bar.advance(task)
+            path,
+            ids,
+            pushes,
+            policy,
+            seed,
+            workers,
+            progress=lambda: bar.advance(task),
+            profiles=profile_names,
         )
     metrics = heldout_metrics(run)
     metrics.update(
         {
             "model": str(path),
             "policy": policy,
+            "profiles": list(profile_names),
             "pushes": pushes,
             "seed": seed,
             "object_ids": ids,
@@ -192,6 +220,72 @@ def evaluate_heldout_cmd(
     for r in metrics["per_push"]:
         t.add_row(str(r["push"]), *fmt(r), f"{r['coverage90']['overall']:.2f}")
     console.print(t)
+
+
+@app.command("ablate-profiles")
+def ablate_profiles_cmd(
+    model: str = typer.Option(..., "--model", help="RUN trained on constant and release pushes"),
+    out: Path = typer.Option(..., "--out", help="profiles.json, one JSON per condition"),
+    objects: int = typer.Option(44, "--objects", help="held-out catalogue objects (≤ 88)"),
+    pushes: int = typer.Option(5, "--pushes", min=1),
+    conditions: list[str] = typer.Option(
+        None,
+        "--condition",
+        help="POLICY:PROFILES, repeatable (default: uniform and active-entropy, each with "
+        "constant and with constant,release)",
+    ),
+    reference: str = typer.Option(
+        None, "--reference", help="also run this model (e.g. pretrained) uniform, constant"
+    ),
+    folds: int = typer.Option(4, "--folds", min=2),
+    seed: int = typer.Option(0, "--seed"),
+    workers: int = typer.Option(2, "--workers", min=1),
+    markdown: Path = typer.Option(None, "--markdown", help="write the RESULTS.md section here"),
+):
+    """Speed-profile ablation (issue 5 (c)): NRMSE of m, μ, I_z (and the rest) after K pushes
+    when the policy may or may not use release pushes, on the same held-out objects."""
+    from rich.progress import Progress
+
+    from pushtoknow.evaluation.heldout import heldout_object_ids
+    from pushtoknow.evaluation.profiles import (
+        DEFAULT_CONDITIONS,
+        parse_condition,
+        profiles_markdown,
+        run_profile_ablation,
+    )
+    from pushtoknow.inference.session import POLICIES
+    from pushtoknow.pretrained import resolve_model_path
+
+    conds = [parse_condition(c) for c in conditions] if conditions else list(DEFAULT_CONDITIONS)
+    for policy, profiles in conds:
+        if policy not in POLICIES:
+            raise typer.BadParameter(f"--condition policy must be one of {', '.join(POLICIES)}")
+        _profiles(",".join(profiles))
+    ids = heldout_object_ids(objects, seed)
+    with Progress(console=err_console) as bar:
+
+        def progress(name: str, total: int):
+            task = bar.add_task(name, total=total)
+            return lambda: bar.advance(task)
+
+        report = run_profile_ablation(
+            resolve_model_path(model),
+            ids,
+            out,
+            conds,
+            pushes,
+            seed,
+            workers,
+            folds,
+            progress,
+            resolve_model_path(reference) if reference else None,
+        )
+    command = f"pushtoknow ablate-profiles --model {model} --out {out} --objects {objects}"
+    command += f" --seed {seed}" + (f" --reference {reference}" if reference else "")
+    text = profiles_markdown(report, command)
+    if markdown is not None:
+        markdown.write_text(text + "\n")
+    console.print(text)
 
 
 @app.command("evaluate")
@@ -434,6 +528,7 @@ def run_inference(
     as_json: bool,
     strip: bool = False,
     sigma_points: int | None = None,
+    profiles: tuple[str, ...] = ("constant",),
 ) -> dict:
     """Shared by `infer` and `demo`: K pushes on the testbed, tables, plot, JSON."""
     from pushtoknow.inference.session import (
@@ -455,7 +550,9 @@ def run_inference(
     truth = spec.params.as_array()
     show = Console(stderr=True) if as_json else console
     sim_cfg = model.sim_config
-    cfg = InferenceConfig(pushes=pushes, policy=policy, num_sigma_points=sigma_points)
+    cfg = InferenceConfig(
+        pushes=pushes, policy=policy, num_sigma_points=sigma_points, profiles=profiles
+    )
     scorer = (
         active_scorer(policy, sim_cfg, cfg.active_horizon_fraction)
         if policy.startswith("active")
@@ -512,9 +609,20 @@ def infer(
     out: Path = typer.Option(Path("infer-out"), "--out", help="where the plot and JSON go"),
     as_json: bool = typer.Option(False, "--json", help="print the estimates as JSON"),
     sigma_points: int = typer.Option(None, "--sigma-points", help="default: the model's (100)"),
+    profiles: str = typer.Option("constant", "--profiles", help=PROFILES_HELP),
 ):
     """Push an object K times on the testbed and estimate its parameters after every push."""
-    run_inference(model, obj, pushes, policy, seed, out, as_json, sigma_points=sigma_points)
+    run_inference(
+        model,
+        obj,
+        pushes,
+        policy,
+        seed,
+        out,
+        as_json,
+        sigma_points=sigma_points,
+        profiles=_profiles(profiles),
+    )
 
 
 @app.command()

@@ -30,6 +30,7 @@ class HeldoutRun:
     seconds: list[float]
     features_truth: np.ndarray | None = None  # (N, K, F) forest features, true poses
     features_vision: np.ndarray | None = None  # (N, K, F) forest features, filtered poses
+    profiles: list[list[str]] | None = None  # (N, K) speed profile of each executed push
 
 
 def expected_product(mean_norm: np.ndarray, cov_norm: np.ndarray) -> float:
@@ -47,7 +48,7 @@ def _run_one(args) -> dict:
     from pushtoknow.testbed.executor import SimulatedExecutor
     from pushtoknow.testbed.objects import load_object_spec
 
-    model_path, object_ref, pushes, policy, seed, sigma_points = args
+    model_path, object_ref, pushes, policy, seed, sigma_points, profiles = args
     t0 = time.perf_counter()
     import torch
 
@@ -55,7 +56,9 @@ def _run_one(args) -> dict:
     model = load_checkpoint(model_path)
     spec = load_object_spec(object_ref)
     sim = model.sim_config
-    cfg = InferenceConfig(pushes=pushes, policy=policy, num_sigma_points=sigma_points)
+    cfg = InferenceConfig(
+        pushes=pushes, policy=policy, num_sigma_points=sigma_points, profiles=profiles
+    )
     scorer = (
         active_scorer(policy, sim, cfg.active_horizon_fraction)
         if policy.startswith("active")
@@ -80,7 +83,18 @@ def _run_one(args) -> dict:
         "product": np.array([expected_product(e.mean_norm, e.cov_norm) for e in rows]),
         "truth": spec.params.as_array(),
         "seconds": time.perf_counter() - t0,
+        "profiles": [rec.push.profile for rec in res.records],
     }
+
+
+def heldout_object_ids(n: int, seed: int = 0) -> list[str]:
+    """`catalogue:ID` of n held-out (test-split) catalogue objects, a seeded random order (the
+    first n of the same permutation for every n)."""
+    from pushtoknow.testbed.objects import catalogue_split
+
+    test_ids = catalogue_split()[1]
+    order = np.random.default_rng(seed).permutation(test_ids)
+    return [f"catalogue:{i}" for i in order[: min(n, len(test_ids))]]
 
 
 def evaluate_heldout(
@@ -92,10 +106,12 @@ def evaluate_heldout(
     workers: int = 1,
     sigma_points: int | None = None,
     progress=None,
+    profiles: tuple[str, ...] = ("constant",),
 ) -> HeldoutRun:
-    """Run inference on each object (`catalogue:ID` or spec strings)."""
+    """Run inference on each object (`catalogue:ID` or spec strings); `profiles`: the speed
+    profiles the policy may use (`InferenceConfig.profiles`)."""
     jobs = [
-        (str(model_path), o, pushes, policy, seed * 100_003 + i, sigma_points)
+        (str(model_path), o, pushes, policy, seed * 100_003 + i, sigma_points, tuple(profiles))
         for i, o in enumerate(objects)
     ]
     if workers <= 1:
@@ -120,6 +136,7 @@ def evaluate_heldout(
         seconds=[r["seconds"] for r in out],
         features_truth=np.stack([r["features_truth"] for r in out]),
         features_vision=np.stack([r["features_vision"] for r in out]),
+        profiles=[r["profiles"] for r in out],
     )
 
 

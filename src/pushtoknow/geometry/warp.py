@@ -68,3 +68,26 @@ def warp_mask(
     theta = warp_affine_theta(pose, pose0, camera).to(mask0.dtype)
     grid = F.affine_grid(theta, list(mask0.shape), align_corners=False)
     return F.grid_sample(mask0, grid, mode="bilinear", padding_mode="zeros", align_corners=False)
+
+
+def marker_mask(mask0: torch.Tensor, pose0: torch.Tensor, camera: CameraModel) -> torch.Tensor:
+    """Where the orientation marker (the object frame's x ≥ 0 half, see the testbed) lies in
+    S_0: the pixels of mask0 (B, 1, H, W) whose centres, in the frame of pose0 (B, 3), have
+    x ≥ 0. Returns (B, 1, H, W). Warp it like S_0 to get the expected marker at another pose."""
+    if mask0.ndim != 4 or mask0.shape[1] != 1 or pose0.shape != (mask0.shape[0], 3):
+        raise ShapeError(
+            f"expected mask0 (B, 1, H, W) and pose0 (B, 3), got {tuple(mask0.shape)} "
+            f"and {tuple(pose0.shape)}"
+        )
+    f = camera.focal_px / camera.position[2]
+    cu, cv = camera.principal_point
+    h, w = mask0.shape[-2:]
+    u = torch.arange(w, dtype=mask0.dtype, device=mask0.device)
+    v = torch.arange(h, dtype=mask0.dtype, device=mask0.device)
+    x = camera.position[0] + (u - cu) / f  # (W,)
+    y = camera.position[1] - (v - cv) / f  # (H,)
+    dx = x[None, None, :] - pose0[:, 0, None, None].to(mask0.dtype)  # (B, 1, W)
+    dy = y[None, :, None] - pose0[:, 1, None, None].to(mask0.dtype)  # (B, H, 1)
+    th = pose0[:, 2, None, None].to(mask0.dtype)
+    body_x = torch.cos(th) * dx + torch.sin(th) * dy  # (B, H, W)
+    return mask0 * (body_x >= 0).to(mask0.dtype)[:, None]

@@ -36,7 +36,7 @@ from pushtoknow.models.checkpoint import TrainedModel
 from pushtoknow.models.learned import PushContext
 from pushtoknow.testbed.config import SimConfig
 from pushtoknow.testbed.executor import PushExecutor, View
-from pushtoknow.testbed.push import Push, pad_positions
+from pushtoknow.testbed.push import ProfileName, Push, pad_positions
 from pushtoknow.testbed.sim import PushRecord
 from pushtoknow.training.data import footprint_from_mask
 from pushtoknow.training.visnet import frames_as_tensors, visnet_measure
@@ -54,6 +54,17 @@ class InferenceConfig(Config):
         (0.002, 0.002, 0.03), description="pose std at a push's start (m, m, rad)"
     )
     active_horizon_fraction: float = Field(0.5, gt=0, le=1)
+    profiles: tuple[ProfileName, ...] = Field(
+        ("constant",),
+        min_length=1,
+        description="speed profiles the policy may use: each candidate gets one (in turn); "
+        "uniform cycles through them push by push, random draws one",
+    )
+
+
+def profile_speeds(sim_config: SimConfig) -> dict[str, float]:
+    """The characteristic speed v (m/s) of each profile under the testbed's push settings."""
+    return {"constant": sim_config.push.speed, "release": sim_config.push.release_peak_speed}
 
 
 @dataclass
@@ -131,25 +142,31 @@ def choose_push(
     pushes: int,
     pose0: np.ndarray,
     rng: np.random.Generator,
-    speed: float,
+    speeds: dict[str, float],
     candidates: int,
     active=None,
+    profiles: tuple[str, ...] = ("constant",),
 ) -> Push:
-    """The k-th push (0-based) of `pushes` by `policy` among `candidates` affordances of S_0.
+    """The k-th push (0-based) of `pushes` by `policy` among `candidates` affordances of S_0;
+    candidate i has speed profile profiles[i mod P] at speeds[profile].
 
     uniform: contact points spread evenly around the object — the candidate whose bearing
-    from the centroid, in the object frame, is nearest to 2πk/K (a seeded offset); random:
-    one random affordance; active-*: `active(list[Push]) → index`."""
+    from the centroid, in the object frame, is nearest to 2πk/K (a seeded offset) — with
+    profile profiles[k mod P]; random: one random affordance and profile; active-*:
+    `active(list[Push]) → index`, so the policy chooses contact, direction and profile."""
     cp, pd = sample_push_affordances(view.s0, camera, candidates, rng)
-    cands = [Push(tuple(cp[i]), float(pd[i]), "constant", speed) for i in range(len(pd))]
+    names = [profiles[i % len(profiles)] for i in range(len(pd))]
+    cands = [Push(tuple(cp[i]), float(pd[i]), names[i], speeds[names[i]]) for i in range(len(pd))]
     if policy == "random":
-        return cands[0]
+        return cands[0] if len(profiles) == 1 else cands[int(rng.integers(len(cands)))]
     if policy == "uniform":
         centre = mask_contour(view.s0, camera).centroid
         bearing = np.arctan2(cp[:, 1] - centre[1], cp[:, 0] - centre[0]) - pose0[2]
         target = 2 * math.pi * k / pushes + rng.uniform(0, 2 * math.pi / pushes)
         diff = np.abs(np.angle(np.exp(1j * (bearing - target))))
-        return cands[int(np.argmin(diff))]
+        profile = profiles[k % len(profiles)]
+        chosen = cands[int(np.argmin(diff))]
+        return dataclasses.replace(chosen, profile=profile, speed=speeds[profile])
     if active is None:
         raise ValueError(f"policy {policy!r} needs an active-selection scorer")
     return cands[int(active(cands))]
@@ -312,7 +329,7 @@ def infer_object(
     active_scorer(estimator, view, pose0) → callable(list[Push]) → index, for active
     policies."""
     est = ObjectEstimator(model, config, seed)
-    speed = float(model.info.get("push_speed", 0.02))
+    speeds = profile_speeds(model.sim_config)
     result = InferenceResult(est.estimate(0), [], truth, object_name=object_name)
     for k in range(config.pushes):
         view = executor.observe()
@@ -330,9 +347,10 @@ def infer_object(
             config.pushes,
             pose0,
             est.rng,
-            speed,
+            speeds,
             config.candidates,
             active,
+            config.profiles,
         )
         rec = executor.execute(push)
         result.poses.append(est.filter_push(rec, view.s0, pose0))

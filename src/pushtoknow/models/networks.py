@@ -240,7 +240,9 @@ class ObsNoiseNet(nn.Module):
 class VisNetConfig(Config):
     """VisNet: CNN (from scratch) + 3 FC on [RGB-D (4 ch), S_0 (1 ch)] → relative pose.
 
-    position_scale: metres per unit of the Δx, Δy outputs.
+    position_scale: metres per unit of the Δx, Δy outputs. marker_channel: the input has one
+    more channel, the expected orientation marker at the reference pose (for testbeds that
+    paint it; `training.visnet.visnet_inputs`).
     """
 
     in_channels: int = 5
@@ -250,6 +252,7 @@ class VisNetConfig(Config):
     strides: tuple[int, ...] = (2, 2, 2, 2)
     hidden_dims: tuple[int, int] = (128, 64)
     position_scale: float = 0.1
+    marker_channel: bool = False
 
 
 class VisNet(nn.Module):

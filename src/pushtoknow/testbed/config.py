@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from typing import Literal
 
 from pydantic import Field
@@ -89,3 +90,18 @@ class SimConfig(Config):
     push: PushConfig = PushConfig()
     workspace_half_extent: float = Field(0.03, ge=0, description="initial xy offset range (m)")
     render: bool = True
+    orientation_marker: bool = Field(
+        True,
+        description="paint the +x half of the object's top face dark (1 mm decal, no mass, no "
+        "contacts) so that vision sees θ of round and symmetric shapes",
+    )
+
+
+def stored_sim_config(raw: dict | str | None) -> SimConfig:
+    """The SimConfig stored with a dataset or a model (dict or JSON string). Settings saved
+    before `orientation_marker` existed were rendered without the marker."""
+    if raw is None:
+        return SimConfig(orientation_marker=False)
+    data = json.loads(raw) if isinstance(raw, str) else dict(raw)
+    data.setdefault("orientation_marker", False)
+    return SimConfig.model_validate(data)

@@ -4,7 +4,7 @@ and the overhead camera."""
 from __future__ import annotations
 
 import numpy as np
-from shapely.geometry import Point
+from shapely.geometry import Point, Polygon, box
 
 from pushtoknow.testbed.config import SimConfig
 from pushtoknow.testbed.objects import ObjectSpec
@@ -17,6 +17,8 @@ PAD_BITS = 2
 OBJECT_RGBA = "0.85 0.35 0.15 1"
 PAD_RGBA = "0.2 0.4 0.9 1"
 TABLE_RGBA = "0.75 0.75 0.72 1"
+MARKER_RGBA = "0.15 0.1 0.1 1"
+MARKER_THICKNESS = 0.001  # m: a decal on the top face; vision sees it, depth barely does
 PRISM_LIFT = 0.0005  # m: the prism floats just above the table; the supports carry the load
 
 
@@ -34,6 +36,19 @@ def support_points(footprint: Footprint, spacing: float, margin: float) -> np.nd
     return pts
 
 
+def marker_pieces(footprint: Footprint) -> list[np.ndarray]:
+    """Convex pieces (each (V, 2), object frame) of the orientation marker: the footprint's
+    half with x ≥ 0. It breaks every symmetry, so the object frame's θ is visible."""
+    minx, miny, maxx, maxy = footprint.polygon.bounds
+    half = box(0.0, miny - 1.0, maxx + 1.0, maxy + 1.0)
+    pieces = []
+    for piece in footprint.convex_pieces():
+        cut = Polygon(piece).intersection(half)
+        if cut.geom_type == "Polygon" and cut.area > 1e-8:
+            pieces.append(np.asarray(cut.exterior.coords)[:-1])
+    return pieces
+
+
 def build_mjcf(spec: ObjectSpec, config: SimConfig) -> str:
     """MJCF XML string for one object on the table."""
     ph, pad, sup, cam = config.physics, config.pad, config.support, config.camera
@@ -47,6 +62,16 @@ def build_mjcf(spec: ObjectSpec, config: SimConfig) -> str:
             f'<geom name="obj_piece{i}" type="mesh" mesh="piece{i}" contype="{PAD_BITS}" '
             f'conaffinity="{PAD_BITS}" rgba="{OBJECT_RGBA}" mass="0" group="1"/>'
         )
+    if config.orientation_marker:
+        for i, piece in enumerate(marker_pieces(spec.footprint)):
+            verts = " ".join(
+                f"{x:.6f} {y:.6f} {z:.6f}" for z in (h, h + MARKER_THICKNESS) for x, y in piece
+            )
+            meshes.append(f'<mesh name="marker{i}" vertex="{verts}"/>')
+            prism_geoms.append(
+                f'<geom name="obj_marker{i}" type="mesh" mesh="marker{i}" contype="0" '
+                f'conaffinity="0" rgba="{MARKER_RGBA}" mass="0" group="1"/>'
+            )
     supports = support_points(spec.footprint, sup.spacing, sup.edge_margin)
     support_geoms = [
         f'<geom name="support{i}" type="sphere" size="{sup.radius}" pos="{x:.6f} {y:.6f} '

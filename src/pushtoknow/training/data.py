@@ -7,7 +7,6 @@ the action and the true parameters.
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass, fields
 from pathlib import Path
@@ -21,7 +20,7 @@ from pushtoknow.common.errors import DatasetError
 from pushtoknow.common.params import normalise_params
 from pushtoknow.datasets.shards import list_shards, open_shard
 from pushtoknow.geometry.affordances import mask_contour
-from pushtoknow.testbed.config import SimConfig
+from pushtoknow.testbed.config import SimConfig, stored_sim_config
 
 FOOTPRINT_VERTICES = 32  # footprint polygons resampled to this many vertices (batchable)
 
@@ -85,7 +84,7 @@ def dataset_camera(root: Path) -> tuple[CameraModel, SimConfig]:
     if not shards:
         raise DatasetError(root, "no shards")
     with h5py.File(shards[0], "r") as f:
-        cfg = SimConfig.model_validate(json.loads(f.attrs["sim_config"]))
+        cfg = stored_sim_config(f.attrs["sim_config"])
     return cfg.camera.model(), cfg
 
 

@@ -37,6 +37,7 @@ from pushtoknow.models.checkpoint import (
     save_checkpoint,
 )
 from pushtoknow.models.learned import LearnedModelsConfig
+from pushtoknow.testbed.config import SimConfig
 from pushtoknow.training.data import (
     PushTensors,
     compute_vision_poses,
@@ -126,6 +127,17 @@ def force_loss_fn(models, pt: PushTensors):
     return fn
 
 
+def visnet_config_for(cfg: VisNetTrainConfig, sim_cfg: SimConfig) -> VisNetTrainConfig:
+    """VisNet's training config for data rendered with `sim_cfg`: with the orientation marker
+    the network gets the expected-marker channel."""
+    if not sim_cfg.orientation_marker or cfg.net.marker_channel:
+        return cfg
+    net = cfg.net.model_copy(
+        update={"marker_channel": True, "in_channels": cfg.net.in_channels + 1}
+    )
+    return cfg.model_copy(update={"net": net})
+
+
 def train_model(
     data: Path,
     out: Path,
@@ -166,7 +178,12 @@ def train_model(
         else:
             frames = load_frames(data, cfg.visnet.frame_every, cfg.max_objects)
             res = train_visnet(
-                frames, camera, cfg.visnet, seed, log=CsvLog(out / "visnet.csv", echo), progress=bar
+                frames,
+                camera,
+                visnet_config_for(cfg.visnet, sim_cfg),
+                seed,
+                log=CsvLog(out / "visnet.csv", echo),
+                progress=bar,
             )
             del frames
             visnet, visnet_summary = res.net, res.val_error

@@ -4,8 +4,10 @@ VisNet sees the current RGB-D image and S_0 warped to a *reference pose* (at inf
 filter's predicted mean; in training the true pose perturbed by noise) and outputs the pose of
 the object relative to that reference, (Δx, Δy, sin Δθ, cos Δθ). Because the residual is small
 (well below half of any shape's symmetry angle), symmetric shapes (rectangles, ellipses, hex)
-need no special treatment and the ±π wrap never arises. A disc's rotation is invisible: VisNet
-learns Δθ ≈ 0 there, i.e. the measurement carries no information about θ.
+need no special treatment and the ±π wrap never arises. Without the testbed's orientation
+marker a disc's rotation is invisible: VisNet learns Δθ ≈ 0 there, i.e. the measurement carries
+no information about θ. With the marker (`SimConfig.orientation_marker`, on by default) VisNet
+also sees where the marker should be at the reference pose and every shape's θ is visible.
 Depth enters as height above the table in units of the object thickness.
 """
 
@@ -22,7 +24,7 @@ from pydantic import Field
 
 from pushtoknow.common.camera import CameraModel
 from pushtoknow.common.config import Config
-from pushtoknow.geometry.warp import warp_mask
+from pushtoknow.geometry.warp import marker_mask, warp_mask
 from pushtoknow.models.networks import VisNet, VisNetConfig
 from pushtoknow.testbed.objects import DEFAULT_HEIGHT
 
@@ -59,12 +61,17 @@ def perturb(pose: torch.Tensor, cfg: VisNetTrainConfig, gen: torch.Generator) ->
     return pose + torch.cat([dxy, dth[:, None]], 1)
 
 
-def visnet_inputs(rgbd, mask0, pose0, ref, camera: CameraModel, crop: int):
+def visnet_inputs(rgbd, mask0, pose0, ref, camera: CameraModel, crop: int, marker=False):
     """VisNet's inputs: a crop×crop window (native resolution) centred on the reference
     position of [RGB, height, height − Ŝ_ref] (the last channel shows the misalignment, which
-    makes small rotations visible), and Ŝ_ref: S_0 warped to the reference pose."""
+    makes small rotations visible), plus, with `marker`, where the orientation marker should
+    be at the reference pose (`marker_mask` warped like S_0), and Ŝ_ref: S_0 warped to the
+    reference pose."""
     s_ref = warp_mask(mask0, ref, pose0, camera)
-    x = torch.cat([rgbd, rgbd[:, 3:4].clamp(0, 1) - s_ref, s_ref], dim=1)
+    parts = [rgbd, rgbd[:, 3:4].clamp(0, 1) - s_ref]
+    if marker:
+        parts.append(warp_mask(marker_mask(mask0, pose0, camera), ref, pose0, camera))
+    x = torch.cat([*parts, s_ref], dim=1)
     n = x.shape[0]
     f = camera.focal_px / camera.position[2]
     cu, cv = camera.principal_point
@@ -78,9 +85,14 @@ def visnet_inputs(rgbd, mask0, pose0, ref, camera: CameraModel, crop: int):
     return w[:, :-1], w[:, -1:]
 
 
+def _net_inputs(net: VisNet, rgbd, mask0, pose0, ref, camera):
+    c = net.config
+    return visnet_inputs(rgbd, mask0, pose0, ref, camera, c.image_size, c.marker_channel)
+
+
 def visnet_loss(net: VisNet, rgbd, mask0, pose, pose0, ref, camera, position_weight=1.0):
     """MSE between VisNet's relative pose and the truth relative to the reference."""
-    out = net(*visnet_inputs(rgbd, mask0, pose0, ref, camera, net.config.image_size))
+    out = net(*_net_inputs(net, rgbd, mask0, pose0, ref, camera))
     target = VisNet.pose_to_target(pose, ref)
     scale = net.config.position_scale
     pos = ((out[:, :2] - target[:, :2]) / scale).square().sum(-1)
@@ -91,7 +103,7 @@ def visnet_loss(net: VisNet, rgbd, mask0, pose, pose0, ref, camera, position_wei
 @torch.no_grad()
 def visnet_measure(net: VisNet, rgbd, mask0, pose0, ref, camera) -> torch.Tensor:
     """Pose measurement (N, 3) = reference ⊕ VisNet residual."""
-    rel = net(*visnet_inputs(rgbd, mask0, pose0, ref, camera, net.config.image_size))
+    rel = net(*_net_inputs(net, rgbd, mask0, pose0, ref, camera))
     return VisNet.to_pose(rel, ref)
 
 
