@@ -2,9 +2,10 @@
 # Regenerate docs/RESULTS.md, docs/results.json and docs/figures/ from scratch, on the CPU:
 #   1. the shipped model's training data and the ablation variants VT-JDF, V-DDF
 #      (scripts/train-variants.sh; skipped where already done),
-#   2. the real MIT Push sample pushes (import-mit, estimate-real),
+#   2. the real MIT Push sample pushes (import-mit, estimate-real), the learning-efficiency and
+#      speed-profile ablations, all 88 held-out objects,
 #   3. `pushtoknow evaluate` (configs/evaluate.yaml) on the shipped model and the variants.
-# Seeds: data 1, training 0, evaluation 0. ~1 h on 2 cores when nothing is cached.
+# Seeds: data 1, training 0, evaluation 0. ~2.5 h on 2 cores when nothing is cached.
 # Usage: bash scripts/make-results.sh [WORKDIR]   (default: runs/pretrained)
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -49,6 +50,10 @@ print(efficiency_markdown(json.load(open(sys.argv[1])), sys.argv[2]))" \
     "pushtoknow ablate-efficiency --config configs/efficiency.yaml --out $WORK/efficiency --seed 0" \
     > "$WORK/efficiency/section.md"
 APPEND+=(--append "$WORK/efficiency/section.md")
+
+# speed profiles (issue 5 (c)): ~40 min; its data, model and conditions are skipped where done
+bash scripts/ablate-profiles.sh "$WORK/profiles"
+APPEND+=(--append "$WORK/profiles/ablation/section.md")
 
 # all 88 held-out objects under the shipped model and uniform pushes (the suite uses 44)
 HCMD="pushtoknow evaluate-heldout --objects 88 --pushes 5 --policy uniform --seed 0 --workers 2"

@@ -10,7 +10,7 @@ from pushtoknow.models.checkpoint import load_checkpoint
 from pushtoknow.pretrained import pretrained_dir, resolve_model_path
 from pushtoknow.testbed.executor import SimulatedExecutor
 from pushtoknow.testbed.objects import catalogue_split, demo_object_id, load_object_spec
-from pushtoknow.training.pipeline import TrainConfig
+from pushtoknow.training.pipeline import TrainConfig, visnet_config_for
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -23,7 +23,12 @@ def test_shipped_model_matches_its_recipe():
     assert (d / "model.pt").stat().st_size < 5e6  # "a few MB"
     shipped = TrainConfig.from_yaml(d / "config.yaml")
     recipe = TrainConfig.from_yaml(REPO / "configs" / "pretrained-vt-addf.yaml")
-    assert shipped == recipe
+    # as run on marker-painted data: VisNet gets the expected-marker channel
+    assert model.sim_config.orientation_marker and model.visnet.config.marker_channel
+    as_run = recipe.model_copy(
+        update={"visnet": visnet_config_for(recipe.visnet, model.sim_config)}
+    )
+    assert shipped == as_run
     info = json.loads((d / "training.json").read_text())
     assert info["objects_from"] == "catalogue-train" and info["data_seed"] == 1
     for curve in ("visnet", "supervised", "end_to_end", "calibration"):
@@ -40,7 +45,7 @@ def test_demo_object_is_held_out():
 def test_shipped_model_estimates_one_push():
     model = load_checkpoint(pretrained_dir())
     spec = load_object_spec(f"catalogue:{demo_object_id()}")
-    ex = SimulatedExecutor(spec, seed=0, recentre=True)
+    ex = SimulatedExecutor(spec, model.sim_config, seed=0, recentre=True)
     try:
         res = infer_object(
             model, ex, InferenceConfig(pushes=1, num_sigma_points=30), 0, ex.initial_pose

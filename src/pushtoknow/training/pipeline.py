@@ -154,11 +154,12 @@ def train_model(
     if not data.exists():
         raise DatasetError(data, "does not exist")
     out.mkdir(parents=True, exist_ok=True)
-    cfg.to_yaml(out / "config.yaml")
+    camera, sim_cfg = dataset_camera(data)
+    cfg = cfg.model_copy(update={"visnet": visnet_config_for(cfg.visnet, sim_cfg)})
+    cfg.to_yaml(out / "config.yaml")  # as run: VisNet's input channels follow the data
     torch.manual_seed(seed)
     t_start = time.perf_counter()
     timings: dict[str, float] = {}
-    camera, sim_cfg = dataset_camera(data)
     vision_only = cfg.variant == "v-ddf"
 
     pt = load_push_tensors(data, cfg.max_objects)
@@ -180,7 +181,7 @@ def train_model(
             res = train_visnet(
                 frames,
                 camera,
-                visnet_config_for(cfg.visnet, sim_cfg),
+                cfg.visnet,
                 seed,
                 log=CsvLog(out / "visnet.csv", echo),
                 progress=bar,
