@@ -12,7 +12,8 @@ from pushtoknow.cli.main import app, main
 from pushtoknow.common.errors import CheckpointError
 from pushtoknow.common.params import PARAM_NAMES
 from pushtoknow.testbed.objects import load_object_spec
-from pushtoknow.training.pipeline import TrainConfig
+from pushtoknow.training.data import dataset_camera
+from pushtoknow.training.pipeline import TrainConfig, visnet_config_for
 from tiny_training import DATA_OBJECTS, tiny_dataset, tiny_train_config
 
 STAGES = ("visnet", "supervised", "end_to_end", "calibration")
@@ -50,8 +51,9 @@ def trained(tmp_path_factory, tiny_yaml):
     return result, run
 
 
-def test_train_writes_the_run(trained):
+def test_train_writes_the_run(trained, tmp_path_factory):
     result, run = trained
+    data = tiny_dataset(tmp_path_factory)
     assert result.exit_code == 0, (result.output, result.exception)
     assert f"wrote {run / 'model.pt'}" in result.stdout.replace("\n", "")
     for name in ("model.pt", "config.yaml", "training.json", *(f"{s}.csv" for s in STAGES)):
@@ -60,7 +62,13 @@ def test_train_writes_the_run(trained):
         lines = (run / f"{stage}.csv").read_text().splitlines()
         assert len(lines) >= 2, stage  # a header and at least one row
         assert stage in result.stderr  # each logged row is echoed
-    assert TrainConfig.from_yaml(run / "config.yaml") == tiny_train_config()
+    # config.yaml is the config as run: VisNet reads the orientation marker of the data
+    expected = tiny_train_config()
+    expected = expected.model_copy(
+        update={"visnet": visnet_config_for(expected.visnet, dataset_camera(data)[1])}
+    )
+    assert expected.visnet.net.marker_channel
+    assert TrainConfig.from_yaml(run / "config.yaml") == expected
     info = json.loads((run / "training.json").read_text())
     assert info["variant"] == "vt-addf" and info["seed"] == 0
     assert info["train_objects"] + info["val_objects"] == DATA_OBJECTS

@@ -94,9 +94,10 @@ def _write(path: Path, streams: dict[str, np.ndarray]) -> Path:
 
 
 def _object_mask(rgb: np.ndarray) -> np.ndarray:
-    """Object pixels of a rendered frame by colour (orange object, grey table, blue pad)."""
+    """Object pixels of a rendered frame by colour (orange object with its near-black orientation
+    marker, grey table, blue pad)."""
     r, g, b = (rgb[..., i].astype(int) for i in range(3))
-    return (r > 150) & (r - b > 100)
+    return ((r > 150) & (r - b > 100)) | (np.maximum(np.maximum(r, g), b) < 90)
 
 
 def _mask_centroid(mask: np.ndarray) -> np.ndarray:

@@ -93,3 +93,17 @@ def test_evaluate_cli_errors(tmp_path_factory, tmp_path):
     result = runner.invoke(app, [*args, "--out", str(tmp_path / "r")])
     assert result.exit_code != 0
     assert "nope" in result.output or "nope" in str(result.exception)
+
+
+def test_cache_key_follows_the_checkpoint_contents(tmp_path):
+    from pushtoknow.evaluation.suite import _cache_key
+
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "model.pt").write_bytes(b"first model")
+    cfg = EvaluationConfig()
+    key = _cache_key(run, "uniform", ["catalogue:1"], cfg)
+    assert _cache_key(run, "uniform", ["catalogue:1"], cfg) == key
+    assert _cache_key(run, "random", ["catalogue:1"], cfg) != key
+    (run / "model.pt").write_bytes(b"retrained model")  # same path, new weights
+    assert _cache_key(run, "uniform", ["catalogue:1"], cfg) != key

@@ -163,11 +163,15 @@ def render_report(results: dict, command: str, appendices: list[str] = ()) -> st
     for m in results["models"]:
         info = m["info"]
         t = info.get("timings", {}).get("total_s")
+        marker = (info.get("sim_config") or {}).get("orientation_marker", False)
         out.append(
             f"- **{m['name']}** `{m['path']}`: trained with seed {info.get('seed')} on "
             f"{info.get('train_objects')} objects × {info.get('pushes_per_object')} pushes "
             f"(data seed {info.get('data_seed')}, {info.get('objects_from')})"
             + (f", {t / 60:.1f} min" if t else "")
+            + "; testbed images "
+            + ("with" if marker else "without")
+            + " the orientation marker (it is evaluated on the same)"
         )
     out += [
         "",

@@ -142,7 +142,10 @@ def novel_object_refs(n: int, seed: int) -> list[str]:
 
 def _cache_key(model: Path, policy: str, objects: list[str], cfg: EvaluationConfig) -> str:
     h = hashlib.sha256()
-    h.update(Path(model).read_bytes() if Path(model).is_file() else str(model).encode())
+    ckpt = Path(model) / "model.pt" if Path(model).is_dir() else Path(model)
+    # the checkpoint's bytes, not its path: a retrained model at the same path must not reuse
+    # the previous model's runs
+    h.update(ckpt.read_bytes() if ckpt.is_file() else str(model).encode())
     settings = [policy, cfg.pushes, cfg.seed, cfg.sigma_points, objects]
     h.update(json.dumps(settings).encode())
     return h.hexdigest()[:16]
