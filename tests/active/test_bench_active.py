@@ -18,7 +18,7 @@ from pushtoknow.testbed.config import PadConfig, PushConfig
 
 def test_run_active_bench_reports_both_scores():
     out = run_active_bench(
-        seed=0, num_candidates=2, num_sigma_points=20, repeats=1, horizon_fraction=0.02
+        seed=0, num_candidates=2, num_sigma_points=20, repeats=1, horizon_fraction=0.04
     )
     assert set(out["decision_s_median"]) == {"kl", "entropy"}
     assert all(v > 0 for v in out["decision_s_median"].values())

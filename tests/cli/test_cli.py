@@ -21,8 +21,8 @@ def test_simulate_then_info(tmp_path):
     r = run("simulate", "--objects", "4", "--pushes", "2", "--out", str(out), "--seed", "0")
     assert "wrote 1 shards" in r.stdout
     info = json.loads(run("dataset", "info", str(out), "--json").stdout)
-    assert info["schema_version"] == 1
-    assert (info["objects"], info["pushes"], info["steps"]) == (4, 8, 8 * 101)
+    assert info["schema_version"] == 1 and info["testbed_version"] == 2
+    assert (info["objects"], info["pushes"], info["steps"]) == (4, 8, 8 * 61)  # 6 s at 10 Hz
     # Re-running resumes: nothing to do.
     r = run("simulate", "--objects", "4", "--pushes", "2", "--out", str(out), "--seed", "0")
     assert "wrote 0 shards, skipped 1" in r.stdout
@@ -56,5 +56,5 @@ def test_missing_gl_names_packages_and_setting(tmp_path):
 def test_push_json(tmp_path):
     r = run("push", "--object", "catalogue:5", "--json", "--out", str(tmp_path / "s.png"))
     s = json.loads(r.stdout)
-    assert s["samples"] == 101 and s["displacement_m"] > 0.0
+    assert s["samples"] == 61 and s["displacement_m"] > 0.0  # 6 s at 10 Hz
     assert (tmp_path / "s.png").stat().st_size > 10_000

@@ -8,6 +8,7 @@ import numpy as np
 from pushtoknow.inference import InferenceConfig, infer_object
 from pushtoknow.models.checkpoint import load_checkpoint
 from pushtoknow.pretrained import pretrained_dir, resolve_model_path
+from pushtoknow.testbed.config import TESTBED_VERSION
 from pushtoknow.testbed.executor import SimulatedExecutor
 from pushtoknow.testbed.objects import catalogue_split, demo_object_id, load_object_spec
 from pushtoknow.training.pipeline import TrainConfig, visnet_config_for
@@ -23,6 +24,8 @@ def test_shipped_model_matches_its_recipe():
     assert (d / "model.pt").stat().st_size < 5e6  # "a few MB"
     shipped = TrainConfig.from_yaml(d / "config.yaml")
     recipe = TrainConfig.from_yaml(REPO / "configs" / "pretrained-vt-addf.yaml")
+    # trained on this testbed's physics (docs/PHYSICS.md)
+    assert model.sim_config.testbed_version == TESTBED_VERSION
     # as run on marker-painted data: VisNet gets the expected-marker channel
     assert model.sim_config.orientation_marker and model.visnet.config.marker_channel
     as_run = recipe.model_copy(

@@ -216,3 +216,21 @@ def test_sim_config_of_models_saved_before_the_orientation_marker():
     del old["orientation_marker"]
     assert stored_sim_config(old).orientation_marker is False
     assert stored_sim_config(SimConfig().model_dump_json()).orientation_marker is True
+
+
+def test_models_saved_before_testbed_versions_read_back_as_version_1(saved, tmp_path):
+    from pushtoknow.testbed.config import TESTBED_VERSION, SimConfig
+
+    _, run = saved
+    payload = payload_of(run)
+    old = SimConfig().model_dump(mode="json")  # as version 1 wrote it: no newer fields
+    del old["testbed_version"], old["physics"]["solver"], old["pad"]["contact_timeconst"]
+    payload["info"]["sim_config"] = old
+    model = load_checkpoint(write_payload(payload, tmp_path))
+    assert model.sim_config.testbed_version == 1  # so a simulator refuses it
+    assert model.sim_config.physics.solver == "Newton"  # version 1's, filled in
+    assert model.sim_config.pad.contact_timeconst == 0.02
+    payload["info"]["sim_config"] = SimConfig().model_dump(mode="json")
+    (tmp_path / "new").mkdir()
+    model = load_checkpoint(write_payload(payload, tmp_path / "new"))
+    assert model.sim_config.testbed_version == TESTBED_VERSION

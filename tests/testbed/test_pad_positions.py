@@ -8,8 +8,7 @@ import pytest
 from pushtoknow.testbed.config import PadConfig, PushConfig, SimConfig
 from pushtoknow.testbed.executor import SimulatedExecutor
 from pushtoknow.testbed.objects import load_object_spec
-from pushtoknow.testbed.push import Push, pad_positions
-from pushtoknow.testbed.sim import PAD_CLEARANCE
+from pushtoknow.testbed.push import PAD_CLEARANCE, Push, pad_positions
 
 FAST = SimConfig(push=PushConfig(horizon=1.5), render=False)
 # catalogue:412 is a triangle with a flat face at x = FACE_X (object frame), spanning y ∈ [-0.084,

@@ -44,7 +44,7 @@ def test_depth_is_metric_and_rgb_shows_object():
     assert np.median(top) == pytest.approx(cam.distance - spec.height, abs=2e-3)
     # The object is coloured differently from the table.
     assert np.abs(rec.rgb[0][rec.s0].mean(0) - rec.rgb[0][~rec.s0].mean(0)).sum() > 60
-    assert rec.rgb.shape == (101, cam.height, cam.width, 3)
+    assert rec.rgb.shape == (61, cam.height, cam.width, 3)  # 6 s at 10 Hz
 
 
 @pytest.mark.parametrize(("shape", "theta"), [("ellip1", 2.0), ("rect1", -0.7), ("hex", 3.0)])

@@ -80,7 +80,7 @@ class ActivePolicy:
     (`score_candidates`); ties go to the first. `last_scores` (M,) keeps the scores of the
     latest decision for logging.
 
-    horizon_steps: filter steps of one push (T - 1 = t_H · rate, 100 for a 10 s push at
+    horizon_steps: filter steps of one push (T - 1 = t_H · rate, 60 for a 6 s push at
     10 Hz); N = round(horizon_fraction · horizon_steps).
     """
 

@@ -5,7 +5,7 @@ best: building each step's `PushContext` (pad where `testbed.push.pad_positions`
 N dual-filter predictions of M objects with C sigma points, and for "entropy" the expected
 covariance update after each. Inference (no autograd), CPU, randomly initialised networks
 (default `LearnedModelsConfig`: "mean" encoder on a 32 px crop), a synthetic disc mask on the
-64×64 camera. Defaults: M = 16, N = 50 (50% of the 101-sample, 10 s horizon at 10 Hz),
+64×64 camera. Defaults: M = 16, N = 30 (50% of the 61-sample, 6 s horizon at 10 Hz),
 C = 100. Also reports where the time goes (per network, from forward hooks, in a separate
 untimed decision).
 """

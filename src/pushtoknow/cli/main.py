@@ -120,6 +120,41 @@ def bench_sim(as_json: bool = typer.Option(False, "--json"), pushes: int = 6, se
     print(json.dumps(res, indent=None if as_json else 1))
 
 
+@bench_app.command("physics")
+def bench_physics(
+    as_json: bool = typer.Option(False, "--json", help="print the report as JSON"),
+    quick: bool = typer.Option(False, "--quick", help="one shape, grid corners only"),
+    save: Path | None = typer.Option(None, "--save", help="write the report's JSON here"),
+    markdown: Path | None = typer.Option(
+        None, "--markdown", help="write the fidelity table (markdown) here"
+    ),
+    before: Path | None = typer.Option(
+        None, "--before", help="JSON report of an earlier testbed version, shown beside"
+    ),
+    seed: int = 0,
+):
+    """Physics fidelity of the testbed: chaos, quasi-static pushing, Coulomb release, what
+    the 10 Hz record reveals, simulation speed (docs/PHYSICS.md)."""
+    from pushtoknow.bench.physics import render_markdown, run_physics_bench
+
+    earlier = None
+    if before is not None:
+        try:
+            earlier = json.loads(before.read_text())
+        except (OSError, json.JSONDecodeError) as e:
+            _fail(ValueError(f"--before {before}: {e}"))
+    report = run_physics_bench(seed=seed, quick=quick).to_dict()
+    if save is not None:
+        save.write_text(json.dumps(report, indent=1) + "\n")
+    table = render_markdown(report, earlier)
+    if markdown is not None:
+        markdown.write_text(table)
+    if as_json:
+        print(json.dumps(report))
+    else:
+        print(table)
+
+
 @bench_app.command("filter")
 def bench_filter(as_json: bool = typer.Option(False, "--json"), seed: int = 0):
     """Filter step latency (C = 100) and batched throughput (32 objects)."""

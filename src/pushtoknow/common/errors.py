@@ -31,3 +31,9 @@ class ShapeError(PushToKnowError, ValueError):
 
 class CheckpointError(PushToKnowError):
     """A checkpoint is missing or was written by an incompatible version or config."""
+
+
+class TestbedVersionError(PushToKnowError, ValueError):
+    """Data or a model come from another physics version of the testbed than this one."""
+
+    __test__ = False  # not a pytest test class despite its name

@@ -251,27 +251,23 @@ def push_action(push: MitPush, shift: np.ndarray | None = None, time_scale: floa
 class MitRenderer:
     """Renders recorded poses of one MIT shape with the testbed's scene (no physics stepping).
 
-    The object's free joint and the pad's two slide joints are set from the recording, then
+    The object's planar joints and the pad's two slide joints are set from the recording, then
     `mj_forward` updates the kinematics before each render.
     """
 
     def __init__(self, spec: ObjectSpec, config: SimConfig | None = None):
         self.sim = PushSimulator(spec, config)
         m = self.sim.model
-        free = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, "object_free")
         px = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, "pusher_x")
-        self._obj_qpos = int(m.jnt_qposadr[free])
         self._pad_qpos = int(m.jnt_qposadr[px])
         self.camera = self.sim.camera
 
     def place(self, pose, pad_xy) -> None:
         """Object at pose (x, y, θ) (m, m, rad) resting on the table, pad centre at pad_xy (m)."""
         data = self.sim.data
-        x, y, th = map(float, pose)
         data.qpos[:] = self.sim.model.qpos0
         data.qvel[:] = 0.0
-        q = self._obj_qpos
-        data.qpos[q : q + 7] = (x, y, 0.0, math.cos(th / 2), 0.0, 0.0, math.sin(th / 2))
+        self.sim.set_object_pose(pose)
         data.qpos[self._pad_qpos : self._pad_qpos + 2] = np.asarray(pad_xy, dtype=np.float64)
         mujoco.mj_forward(self.sim.model, data)
 

@@ -25,6 +25,7 @@ import numpy as np
 
 from pushtoknow import __version__
 from pushtoknow.common.errors import DatasetError
+from pushtoknow.testbed.config import stored_sim_config
 from pushtoknow.testbed.objects import ObjectSpec
 from pushtoknow.testbed.push import Push
 from pushtoknow.testbed.sim import PushRecord
@@ -176,15 +177,18 @@ def list_shards(root: Path) -> list[Path]:
 
 
 def dataset_info(root: Path) -> dict:
-    """Summary of a dataset directory: schema_version, shards, objects, pushes, steps, bytes."""
+    """Summary of a dataset directory: schema_version, testbed_version (the physics the pushes
+    were simulated with, docs/PHYSICS.md), shards, objects, pushes, steps, bytes."""
     shards = list_shards(root)
     if not shards:
         raise DatasetError(root, f"no {SHARD_GLOB} files")
     objects = pushes = steps = 0
+    testbed_versions = set()
     profiles: dict[str, int] = {}
     image_shape = None
     for s in shards:
         with open_shard(s) as f:
+            testbed_versions.add(stored_sim_config(f.attrs["sim_config"]).testbed_version)
             for g in f["objects"].values():
                 objects += 1
                 for p in g["pushes"].values():
@@ -195,6 +199,7 @@ def dataset_info(root: Path) -> dict:
                     image_shape = list(p["rgb"].shape[1:])
     return {
         "schema_version": SCHEMA_VERSION,
+        "testbed_version": max(testbed_versions),
         "path": str(root),
         "shards": len(shards),
         "objects": objects,

@@ -51,7 +51,7 @@ MIT Push files, and reports:
 Honest caveats (in ``notes`` of the report): the real object is not a catalogue object (its
 mass and I_z lie inside the catalogue's ranges, not on the grid; plywood's μ ≈ 0.29 is below
 the catalogue's μ range [0.35, 0.7], so the catalogue prior barely covers it); the shipped
-model was trained on 10 s pushes at 20 mm/s (≈ 17 cm of object travel), while the MIT sample
+model was trained on 6 s pushes at 20 mm/s (≈ 10.5 cm of object travel), while the MIT sample
 pushes last ≈ 0.5 s at 100 mm/s (3–5 cm). Import with ``--as-speed 20`` to present them at
 the training speed by time rescaling (exact only for quasi-static pushing; see
 `pushtoknow.datasets.mit_import`).

@@ -102,11 +102,13 @@ class TrainedModel:
     @property
     def sim_config(self):
         """The testbed settings of the model's training data (push horizon, speed, camera):
-        inference pushes the same way. Models saved without them get the defaults."""
-        from pushtoknow.testbed.config import SimConfig
+        inference pushes the same way. Models saved without them get the defaults; settings
+        saved before testbed versions existed read back as version 1 (a simulator refuses
+        them: such a model must be retrained)."""
+        from pushtoknow.testbed.config import SimConfig, stored_sim_config
 
         raw = self.info.get("sim_config")
-        return SimConfig() if raw is None else SimConfig.model_validate(raw)
+        return SimConfig() if raw is None else stored_sim_config(raw)
 
     @property
     def vision_only(self) -> bool:

@@ -342,7 +342,7 @@ class LearnedObservationNoise(ObservationNoiseModel):
 
 class ScaledObservationNoise(ObservationNoiseModel):
     """R = scale · R_base(z): the observation noise of a trained model inflated by a factor
-    calibrated on validation data. 100 updates per push treat model errors that persist over
+    calibrated on validation data. 60 updates per push treat model errors that persist over
     the push as independent; inflating R (`training.pipeline` calibrates it) keeps the
     parameter belief from becoming overconfident."""
 

@@ -10,6 +10,8 @@ import numpy as np
 
 from pushtoknow.testbed.config import PadConfig, PushConfig
 
+PAD_CLEARANCE = 1e-6  # m, clearance at the start: a release push starts touching, no impact
+
 ProfileName = Literal["constant", "release"]
 PROFILES: tuple[str, ...] = ("constant", "release")
 
@@ -105,8 +107,6 @@ def pad_positions(
     object's boundary and pd is the inward normal there (or the line misses the object).
     pad_radius: m, default `PadConfig().radius`.
     """
-    from pushtoknow.testbed.sim import PAD_CLEARANCE  # lazy: the simulator imports MuJoCo
-
     if push.profile == "constant":
         profile = constant_profile(push.speed, cfg.horizon)
     elif push.profile == "release":

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 from shapely.geometry import Point, Polygon, box
 
+from pushtoknow.common.params import GRAVITY
 from pushtoknow.testbed.config import SimConfig
 from pushtoknow.testbed.objects import ObjectSpec
 from pushtoknow.testbed.shapes import Footprint
@@ -20,20 +21,58 @@ TABLE_RGBA = "0.75 0.75 0.72 1"
 MARKER_RGBA = "0.15 0.1 0.1 1"
 MARKER_THICKNESS = 0.001  # m: a decal on the top face; vision sees it, depth barely does
 PRISM_LIFT = 0.0005  # m: the prism floats just above the table; the supports carry the load
+PRESSURE_LENGTH = 0.05  # m: scales positions in the support-load problem (conditioning only)
+LOAD_SPRING_REST = -1000.0  # m: a spring this far below loads a support with a constant force
+SUPPORT_MASS_SHARE = 0.01  # at most this share of the mass sits in the supports (see build_mjcf)
 
 
 def support_points(footprint: Footprint, spacing: float, margin: float) -> np.ndarray:
-    """Grid of support points (N, 2) inside the footprint, symmetric about the centroid."""
+    """Support points (N, 2), object frame: a grid at `spacing` inside the footprint shrunk by
+    `margin`, plus points every `spacing` along that shrunk outline, so their convex hull is
+    the footprint less `margin` and any CoM inside it can be carried with positive loads."""
     poly = footprint.polygon.buffer(-margin)
+    if poly.is_empty or poly.area <= 0:
+        poly = footprint.polygon.buffer(-0.25 * footprint.polygon.length / len(footprint.vertices))
     minx, miny, maxx, maxy = footprint.polygon.bounds
     nx = int(np.ceil(max(abs(minx), abs(maxx)) / spacing))
     ny = int(np.ceil(max(abs(miny), abs(maxy)) / spacing))
     xs = np.arange(-nx, nx + 1) * spacing
     ys = np.arange(-ny, ny + 1) * spacing
-    pts = np.array([(x, y) for x in xs for y in ys if poly.contains(Point(x, y))])
-    if len(pts) < 3:  # tiny objects: fall back to a triangle of supports
-        pts = 0.5 * footprint.vertices[np.linspace(0, len(footprint.vertices) - 1, 3).astype(int)]
-    return pts
+    inner = poly.buffer(-0.5 * spacing)
+    grid = [(x, y) for x in xs for y in ys if inner.contains(Point(x, y))]
+    if poly.geom_type != "Polygon":  # a thin neck split the shrunk footprint: keep the largest
+        poly = max(poly.geoms, key=lambda g: g.area)
+    ring = poly.exterior
+    n_ring = max(3, int(np.ceil(ring.length / spacing)))
+    edge = [ring.interpolate(t, normalized=True).coords[0] for t in np.arange(n_ring) / n_ring]
+    return np.array(grid + edge, dtype=np.float64).reshape(-1, 2)
+
+
+def support_loads(points: np.ndarray, com) -> np.ndarray:
+    """Share of the weight (N,) each support point carries: ≥ 0, summing to 1, centred on the
+    CoM (Σ w_i p_i = com, the moment balance of a body at rest).
+
+    The shares closest to uniform that satisfy those conditions: a pressure linear in position
+    (a rigid body on an elastic foundation), with the points it would make negative lifted off.
+    """
+    from scipy.optimize import lsq_linear
+
+    pts = np.asarray(points, dtype=np.float64)
+    n = len(pts)
+    a = np.vstack([np.ones(n), pts.T / PRESSURE_LENGTH])
+    b = np.array([1.0, *np.asarray(com, dtype=np.float64) / PRESSURE_LENGTH])
+    k = 1e4  # weight of the equality rows: moment balance to ~1e-8 m
+    lhs = np.vstack([np.eye(n) * n, k * a])
+    rhs = np.concatenate([np.ones(n), k * b])
+    w = lsq_linear(lhs, rhs, bounds=(0.0, np.inf), method="bvls", tol=1e-14).x
+    w = np.clip(w, 0.0, None)
+    w /= w.sum()
+    err = float(np.linalg.norm(w @ pts - np.asarray(com)))
+    if err > 1e-5:
+        raise ValueError(
+            f"the supports cannot carry a CoM at {list(com)} (m): it lies outside their hull"
+        )
+    return w
 
 
 def marker_pieces(footprint: Footprint) -> list[np.ndarray]:
@@ -72,23 +111,45 @@ def build_mjcf(spec: ObjectSpec, config: SimConfig) -> str:
                 f'<geom name="obj_marker{i}" type="mesh" mesh="marker{i}" contype="0" '
                 f'conaffinity="0" rgba="{MARKER_RGBA}" mass="0" group="1"/>'
             )
+    # Supports: each point is a small body on a vertical slide joint under the planar object,
+    # pressed on the table by a constant load w_i·m·g (its own weight plus a joint spring with
+    # a rest length 1 km below, constant to 1e-6). The loads are fixed shares centred on the
+    # CoM, so the friction of each point is exactly μ·w_i·m·g while it slides and the object
+    # neither tilts nor bounces: the planar motion depends on the pressure distribution alone.
     supports = support_points(spec.footprint, sup.spacing, sup.edge_margin)
-    support_geoms = [
-        f'<geom name="support{i}" type="sphere" size="{sup.radius}" pos="{x:.6f} {y:.6f} '
-        f'{sup.radius}" contype="{TABLE_BITS}" conaffinity="{TABLE_BITS}" condim="3" '
-        f'friction="{p.friction} 0 0" mass="0" rgba="0 0 0 0" group="3"/>'
-        for i, (x, y) in enumerate(supports)
-    ]
-    # Off-axis moments of inertia: thin-plate relation plus thickness; they satisfy the
-    # triangle inequality for any positive I_z and do not affect planar motion.
-    ixx = p.inertia / 2 + p.mass * h * h / 12
+    loads = support_loads(supports, (p.com_x, p.com_y))
+    keep = loads > 1e-9
+    supports, loads = supports[keep], loads[keep]
+    com = np.array([p.com_x, p.com_y])
+    spread = float(loads @ np.sum((supports - com) ** 2, axis=1))  # m², Σ w_i ‖p_i − c‖²
+    share = min(SUPPORT_MASS_SHARE, 0.5 * p.inertia / max(p.mass * spread, 1e-12))
+    support_bodies = []
+    for i, ((x, y), w) in enumerate(zip(supports, loads)):
+        m_i = share * w * p.mass
+        stiffness = (w * p.mass * GRAVITY - m_i * GRAVITY) / -LOAD_SPRING_REST
+        support_bodies.append(
+            f'<body name="support{i}" pos="{x:.6f} {y:.6f} 0">'
+            f'<joint name="support{i}_z" type="slide" axis="0 0 1" stiffness="{stiffness:.9g}" '
+            f'springref="{LOAD_SPRING_REST}"/>'
+            f'<inertial pos="0 0 {sup.radius}" mass="{m_i:.9g}" diaginertia="1e-9 1e-9 1e-9"/>'
+            f'<geom name="support{i}" type="sphere" size="{sup.radius}" pos="0 0 {sup.radius}" '
+            f'contype="{TABLE_BITS}" conaffinity="{TABLE_BITS}" condim="3" '
+            f'friction="{p.friction} 0 0" mass="0" rgba="0 0 0 0" group="3"/></body>'
+        )
+    # The object body carries the rest of the mass, placed so that the whole assembly has the
+    # object's mass, CoM and I_z (the supports' mass is centred on the CoM by construction).
+    body_mass = (1.0 - share) * p.mass
+    body_inertia = p.inertia - share * p.mass * spread
+    # Off-axis moments of inertia do not affect planar motion (no tilt); thin-plate values.
+    ixx = body_inertia / 2 + body_mass * h * h / 12
     pad_condim = 1 if pad.friction == 0 else 3
     fov = cam.fovy_deg
     size = max(cam.width, cam.height)
     return f"""
 <mujoco model="pushtoknow">
   <compiler angle="radian" inertiafromgeom="false"/>
-  <option timestep="{ph.timestep}" cone="{ph.cone}" integrator="implicitfast"/>
+  <option timestep="{ph.timestep}" cone="{ph.cone}" impratio="{ph.impratio}"
+          solver="{ph.solver}" integrator="implicitfast"/>
   <visual>
     <global offwidth="{size}" offheight="{size}"/>
     <quality shadowsize="0" offsamples="0"/>
@@ -103,11 +164,13 @@ def build_mjcf(spec: ObjectSpec, config: SimConfig) -> str:
           conaffinity="{TABLE_BITS}" friction="{ph.table_friction} 0 0" rgba="{TABLE_RGBA}"/>
     <camera name="overhead" pos="0 0 {cam.distance}" fovy="{fov}"/>
     <body name="object" pos="0 0 0">
-      <freejoint name="object_free"/>
-      <inertial pos="{p.com_x} {p.com_y} {h / 2}" mass="{p.mass}"
-                diaginertia="{ixx} {ixx} {p.inertia}"/>
+      <joint name="object_x" type="slide" axis="1 0 0"/>
+      <joint name="object_y" type="slide" axis="0 1 0"/>
+      <joint name="object_yaw" type="hinge" axis="0 0 1"/>
+      <inertial pos="{p.com_x} {p.com_y} {h / 2}" mass="{body_mass}"
+                diaginertia="{ixx} {ixx} {body_inertia}"/>
       {"".join(prism_geoms)}
-      {"".join(support_geoms)}
+      {"".join(support_bodies)}
     </body>
     <body name="pusher" pos="0 0 {pad.z}">
       <joint name="pusher_x" type="slide" axis="1 0 0"/>
@@ -115,7 +178,8 @@ def build_mjcf(spec: ObjectSpec, config: SimConfig) -> str:
       <inertial pos="0 0 0" mass="{pad.mass}" diaginertia="1 1 1"/>
       <geom name="pad" type="cylinder" size="{pad.radius} {pad.half_height}"
             contype="{PAD_BITS}" conaffinity="{PAD_BITS}" condim="{pad_condim}"
-            friction="{pad.friction} 0 0" priority="1" rgba="{PAD_RGBA}"/>
+            friction="{pad.friction} 0 0" priority="1" solref="{pad.contact_timeconst} 1"
+            rgba="{PAD_RGBA}"/>
     </body>
   </worldbody>
 </mujoco>

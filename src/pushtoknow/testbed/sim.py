@@ -8,21 +8,27 @@ force exerted *by the pad on the object* in world axes, averaged over each sampl
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from pushtoknow.common.params import GRAVITY
 from pushtoknow.testbed import render as _render  # sets MUJOCO_GL before mujoco is imported
-from pushtoknow.testbed.config import SimConfig
+from pushtoknow.testbed.config import SimConfig, check_testbed_version
 from pushtoknow.testbed.objects import ObjectSpec
-from pushtoknow.testbed.push import Push, SpeedProfile, constant_profile, release_profile
+from pushtoknow.testbed.push import (
+    PAD_CLEARANCE,
+    Push,
+    SpeedProfile,
+    constant_profile,
+    release_profile,
+)
 from pushtoknow.testbed.scene import build_mjcf
 
 mujoco = _render.mujoco
 
 SETTLE_TIME = 0.2  # s of physics before a push so the supports reach equilibrium
-PAD_CLEARANCE = 0.001  # m, minimal clearance between the pad and the object at the start
+SLIDE_WINDOW = 0.5  # s after the pad stops that a release push keeps the fine physics step
 
 
 @dataclass(eq=False)
@@ -60,17 +66,13 @@ class PushRecord:
     __hash__ = None
 
 
-def yaw_from_quat(q: np.ndarray) -> float:
-    w, x, y, z = q
-    return math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
-
-
 class PushSimulator:
     """Simulates pushes on one object. Deterministic given the seed passed to `execute`."""
 
     def __init__(self, spec: ObjectSpec, config: SimConfig | None = None):
         self.spec = spec
         self.config = config or SimConfig()
+        check_testbed_version(self.config, "the simulation settings (of a model or dataset)")
         self.model = mujoco.MjModel.from_xml_string(build_mjcf(spec, self.config))
         self.data = mujoco.MjData(self.model)
         m = self.model
@@ -82,12 +84,12 @@ class PushSimulator:
             for g in range(m.ngeom)
             if m.geom_bodyid[g] == obj_body and m.geom_type[g] == mujoco.mjtGeom.mjGEOM_MESH
         }
-        self._obj_qpos = m.jnt_qposadr[
-            mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, "object_free")
-        ]
-        self._obj_qvel = m.jnt_dofadr[
-            mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, "object_free")
-        ]
+        ox = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, "object_x")
+        self._obj_qpos = int(m.jnt_qposadr[ox])  # (x, y, θ) are three consecutive joints
+        self._obj_qvel = int(m.jnt_dofadr[ox])
+        self._support_geom_set = {
+            g for g in range(m.ngeom) if m.body_parentid[m.geom_bodyid[g]] == obj_body
+        }
         jx = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, "pusher_x")
         self._pad_qpos = m.jnt_qposadr[jx]
         self._pad_qvel = m.jnt_dofadr[jx]
@@ -105,14 +107,17 @@ class PushSimulator:
         return self._renderer
 
     def object_pose(self) -> np.ndarray:
-        """(3,) current (x, y, θ) of the object's geometric frame, θ in (-π, π]."""
-        q = self.data.qpos[self._obj_qpos : self._obj_qpos + 7]
-        return np.array([q[0], q[1], yaw_from_quat(q[3:7])])
+        """(3,) current (x, y, θ) of the object's geometric frame (θ unwrapped)."""
+        return self.data.qpos[self._obj_qpos : self._obj_qpos + 3].copy()
 
     def object_velocity(self) -> np.ndarray:
         """(3,) world planar linear velocity of the geometric frame and yaw rate (m/s, rad/s)."""
-        v = self.data.qvel[self._obj_qvel : self._obj_qvel + 6]
-        return np.array([v[0], v[1], v[5]])
+        return self.data.qvel[self._obj_qvel : self._obj_qvel + 3].copy()
+
+    def set_object_pose(self, pose) -> None:
+        """Place the object at (x, y, θ) (m, m, rad) at rest; kinematics not yet updated."""
+        self.data.qpos[self._obj_qpos : self._obj_qpos + 3] = np.asarray(pose, dtype=np.float64)
+        self.data.qvel[self._obj_qvel : self._obj_qvel + 3] = 0.0
 
     def _set_pad(self, xy: np.ndarray, vel: np.ndarray) -> None:
         self.data.qpos[self._pad_qpos : self._pad_qpos + 2] = xy
@@ -122,9 +127,7 @@ class PushSimulator:
         """Place the object at rest at `pose` (x, y, θ), pad parked away; settle. Returns pose."""
         mujoco.mj_resetData(self.model, self.data)
         x, y, th = map(float, pose)
-        q = self.data.qpos
-        q[self._obj_qpos : self._obj_qpos + 3] = (x, y, 0.0)
-        q[self._obj_qpos + 3 : self._obj_qpos + 7] = (math.cos(th / 2), 0, 0, math.sin(th / 2))
+        self.set_object_pose((x, y, th))
         park = np.array([x, y]) + 0.5  # well away from the object
         steps = int(round(SETTLE_TIME / self.model.opt.timestep))
         for _ in range(steps):
@@ -136,6 +139,19 @@ class PushSimulator:
         """Current RGB (H, W, 3) uint8, depth (H, W) float32 m, and object mask S (H, W) bool."""
         rgb, depth = self.renderer.rgbd(self.data)
         return rgb, depth, self.renderer.segmentation(self.data)
+
+    def support_load(self) -> float:
+        """Total normal force of the table on the supports over the object's weight (1 at rest;
+        below 1 when supports lose contact)."""
+        m, d = self.model, self.data
+        total = 0.0
+        f = np.zeros(6)
+        for i in range(d.ncon):
+            c = d.contact[i]
+            if c.geom1 in self._support_geom_set or c.geom2 in self._support_geom_set:
+                mujoco.mj_contactForce(m, d, i, f)
+                total += f[0]
+        return total / (self.spec.params.mass * GRAVITY)
 
     def pad_force_on_object(self) -> np.ndarray:
         """(2,) planar force (N, world) the pad exerts on the object at this physics step.
@@ -217,11 +233,21 @@ class PushSimulator:
             H, W = cfg.camera.height, cfg.camera.width
             rgb = np.zeros((T, H, W, 3), np.uint8)
             depth = np.zeros((T, H, W), np.float32)
-        tr = {"time": [], "pose": [], "velocity": [], "force": []} if trace else None
+        tr = (
+            {"time": [], "pose": [], "velocity": [], "force": [], "support_load": []}
+            if trace
+            else None
+        )
 
-        # Pad trajectory at every physics step, computed once (the loop only copies it in).
-        n_steps = n_samples * steps_per_sample
-        t_steps = np.arange(n_steps) * dt
+        # Physics steps of each sample: `timestep`, split into `dynamic_substeps` while a
+        # release push accelerates, releases and slides. The pad trajectory at every step is
+        # computed once (the loop only copies it in).
+        substeps = np.ones(T, dtype=np.int64)
+        if push.profile == "release":
+            dynamic_end = profile.times[-2] + SLIDE_WINDOW
+            substeps[1:] = np.where(time[:-1] < dynamic_end, cfg.physics.dynamic_substeps, 1)
+        step_dt = np.repeat(dt / substeps[1:], steps_per_sample * substeps[1:])
+        t_steps = np.concatenate([[0.0], np.cumsum(step_dt)[:-1]])
         pad_pos = start[None] + np.outer(profile.distance(t_steps), u)
         pad_vel = np.outer(np.interp(t_steps, profile.times, profile.speeds), u)
 
@@ -229,37 +255,38 @@ class PushSimulator:
         qa, va = self._pad_qpos, self._pad_qvel
         self._set_pad(start, u * profile.speed(0.0))
         mujoco.mj_forward(model, data)
-        theta_prev = self.object_pose()[2]
-        theta_unwrapped = theta_prev
         step = 0
-        for k in range(T):
-            if k > 0:
-                acc = np.zeros(2)
-                touching = 0
-                for _ in range(steps_per_sample):
-                    data.qpos[qa : qa + 2] = pad_pos[step]
-                    data.qvel[va : va + 2] = pad_vel[step]
-                    mujoco.mj_step(model, data)
-                    step += 1
-                    f = -data.qfrc_constraint[va : va + 2]
-                    acc += f
-                    touching += bool(f[0] or f[1])
-                    if tr is not None:
-                        tr["time"].append(step * dt)
-                        tr["pose"].append(self.object_pose())
-                        tr["velocity"].append(self.object_velocity())
-                        tr["force"].append(f.copy())
-                force[k] = acc / steps_per_sample
-                contact_share[k] = touching / steps_per_sample
-            p = self.object_pose()
-            theta_unwrapped += math.remainder(p[2] - theta_prev, 2 * math.pi)
-            theta_prev = p[2]
-            pose[k] = (p[0], p[1], theta_unwrapped)
-            pusher[k] = data.qpos[qa : qa + 2]
-            if render:
-                if k == 0:
-                    s0 = self.renderer.segmentation(data)
-                rgb[k], depth[k] = self.renderer.rgbd(data)
+        try:
+            for k in range(T):
+                if k > 0:
+                    acc = np.zeros(2)
+                    touching = 0
+                    n = steps_per_sample * int(substeps[k])
+                    model.opt.timestep = dt / int(substeps[k])
+                    for _ in range(n):
+                        data.qpos[qa : qa + 2] = pad_pos[step]
+                        data.qvel[va : va + 2] = pad_vel[step]
+                        mujoco.mj_step(model, data)
+                        step += 1
+                        f = -data.qfrc_constraint[va : va + 2]
+                        acc += f
+                        touching += bool(f[0] or f[1])
+                        if tr is not None:
+                            tr["time"].append(t_steps[step - 1] + step_dt[step - 1])
+                            tr["pose"].append(self.object_pose())
+                            tr["velocity"].append(self.object_velocity())
+                            tr["force"].append(f.copy())
+                            tr["support_load"].append(self.support_load())
+                    force[k] = acc / n
+                    contact_share[k] = touching / n
+                pose[k] = self.object_pose()
+                pusher[k] = data.qpos[qa : qa + 2]
+                if render:
+                    if k == 0:
+                        s0 = self.renderer.segmentation(data)
+                    rgb[k], depth[k] = self.renderer.rgbd(data)
+        finally:
+            model.opt.timestep = dt
 
         noise = rng.normal(0.0, cfg.tactile.force_noise_std, size=(T, 2))
         contact = (contact_share >= cfg.tactile.contact_threshold).astype(np.float64)

@@ -37,7 +37,7 @@ from pushtoknow.models.checkpoint import (
     save_checkpoint,
 )
 from pushtoknow.models.learned import LearnedModelsConfig
-from pushtoknow.testbed.config import SimConfig
+from pushtoknow.testbed.config import SimConfig, check_testbed_version
 from pushtoknow.training.data import (
     PushTensors,
     compute_vision_poses,
@@ -155,6 +155,7 @@ def train_model(
         raise DatasetError(data, "does not exist")
     out.mkdir(parents=True, exist_ok=True)
     camera, sim_cfg = dataset_camera(data)
+    check_testbed_version(sim_cfg, f"the pushes of dataset {data}")
     cfg = cfg.model_copy(update={"visnet": visnet_config_for(cfg.visnet, sim_cfg)})
     cfg.to_yaml(out / "config.yaml")  # as run: VisNet's input channels follow the data
     torch.manual_seed(seed)

@@ -1,0 +1,59 @@
+"""Support points and the loads that put the centre of pressure under the CoM."""
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from pushtoknow.testbed.scene import support_loads, support_points
+from pushtoknow.testbed.shapes import CATALOGUE_SHAPES, footprint_from_shape
+
+MARGIN = 0.002
+
+
+@pytest.mark.parametrize("shape", sorted(CATALOGUE_SHAPES))
+def test_support_points_lie_inside_and_reach_the_edge(shape):
+    fp = footprint_from_shape(CATALOGUE_SHAPES[shape])
+    pts = support_points(fp, 0.016, MARGIN)
+    assert len(pts) >= 8
+    assert all(fp.contains(p, margin=MARGIN - 1e-9) for p in pts)
+    # Their hull reaches to within the margin (+ a pitch along the edge) of the outline.
+    from shapely.geometry import MultiPoint
+
+    hull = MultiPoint([tuple(p) for p in pts]).convex_hull
+    assert hull.area > fp.polygon.buffer(-MARGIN - 0.002).area
+
+
+def test_centred_com_gives_the_centroid_of_the_points():
+    fp = footprint_from_shape(CATALOGUE_SHAPES["rect1"])
+    pts = support_points(fp, 0.016, MARGIN)
+    w = support_loads(pts, pts.mean(axis=0))
+    np.testing.assert_allclose(w, 1.0 / len(pts), atol=1e-9)  # uniform pressure
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    shape=st.sampled_from(sorted(CATALOGUE_SHAPES)),
+    u=st.floats(0.0, 1.0),
+    v=st.floats(0.0, 1.0),
+)
+def test_loads_are_nonnegative_sum_to_one_and_balance_at_the_com(shape, u, v):
+    fp = footprint_from_shape(CATALOGUE_SHAPES[shape])
+    poly = fp.polygon.buffer(-0.005)  # the objects' CoM rule: 5 mm inside the footprint
+    minx, miny, maxx, maxy = poly.bounds
+    com = np.array([minx + u * (maxx - minx), miny + v * (maxy - miny)])
+    from shapely.geometry import Point
+
+    if not poly.contains(Point(*com)):
+        return
+    pts = support_points(fp, 0.016, MARGIN)
+    w = support_loads(pts, com)
+    assert (w >= 0).all()
+    assert w.sum() == pytest.approx(1.0, abs=1e-12)
+    np.testing.assert_allclose(w @ pts, com, atol=2e-5)
+
+
+def test_a_com_the_supports_cannot_carry_is_refused():
+    fp = footprint_from_shape(CATALOGUE_SHAPES["rect1"])
+    with pytest.raises(ValueError, match="outside their hull"):
+        support_loads(support_points(fp, 0.016, MARGIN), (0.2, 0.0))
