@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Reproduce the shipped model src/pushtoknow/pretrained/vt-addf from scratch, on the CPU:
 # generate its training data (400 catalogue-train objects × 4 pushes, seed 1) and train it
-# (configs/pretrained-vt-addf.yaml, seed 0). ~5 min of simulation + ~25 min of training on
+# (configs/pretrained-vt-addf.yaml, seed 0). ~4 min of simulation + ~10 min of training on
 # 2 cores. Usage: bash scripts/train-pretrained.sh [WORKDIR]   (default: runs/pretrained)
 set -euo pipefail
 cd "$(dirname "$0")/.."
