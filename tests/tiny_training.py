@@ -57,9 +57,10 @@ TINY_TRAIN = {
         "val_pushes": 2,
         "num_sigma_points": SIGMA_POINTS,
     },
+    "sequence_calibration": {"weights": [0.0, 1.0], "num_sigma_points": SIGMA_POINTS},
     "inference_sigma_points": SIGMA_POINTS,
 }
-TINY_CALIBRATION_GRID = 2  # rows of calibration.csv
+TINY_CALIBRATION_GRID = 2  # rows of calibration.csv (and of sequence_calibration.csv)
 
 _cache: dict[str, Path] = {}
 

@@ -140,7 +140,7 @@ def test_infer_json(trained, tmp_path):
     assert len(report["pushes"]) == 1
     estimate = report["pushes"][0]["estimate"]
     assert set(estimate) == set(PARAM_NAMES) == {"mass", "friction", "com_x", "com_y", "inertia"}
-    assert all(set(v) == {"mean", "std"} and v["std"] > 0 for v in estimate.values())
+    assert all(set(v) == {"mean", "std", "interval90"} and v["std"] > 0 for v in estimate.values())
     truth = load_object_spec("catalogue:117").params
     assert report["truth"] == {n: getattr(truth, n) for n in PARAM_NAMES}
     assert json.loads((out / "estimates.json").read_text()) == report

@@ -17,7 +17,7 @@ from pushtoknow.evaluation.figures import (
     plot_nrmse_vs_pushes,
     read_curve,
 )
-from pushtoknow.evaluation.metrics import coverage
+from pushtoknow.evaluation.metrics import coverage, gaussian_zscores
 
 DPI = 50  # small PNGs: fast to write and read back
 
@@ -188,7 +188,8 @@ def constructed(N=20, seed=0):
 
 def test_calibration_coverage_exact(tmp_path):
     mean, std, truth = constructed()
-    cov = plot_calibration(mean, std, truth, tmp_path / "cal.png", title="t", dpi=DPI)
+    z = gaussian_zscores(mean, std, truth)
+    cov = plot_calibration(z, tmp_path / "cal.png", title="t", dpi=DPI)
     assert_png(tmp_path / "cal.png", (5.4, 4.0))
     p = np.array(CALIBRATION_LEVELS)
     assert cov["levels"] == pytest.approx(p)
@@ -211,24 +212,23 @@ def test_calibration_agrees_with_metrics_coverage():
     rng = np.random.default_rng(3)
     mean, std = rng.normal(size=(200, 5)), rng.uniform(0.5, 1.5, size=(200, 5))
     truth = mean + rng.normal(size=(200, 5))
-    cov = calibration_coverage(mean, std, truth, levels=[0.9])
-    ref = coverage(mean, std, truth, level=0.9)
+    z = gaussian_zscores(mean, std, truth)
+    cov = calibration_coverage(z, levels=[0.9])
+    ref = coverage(z, level=0.9)
     for name in [*PARAM_NAMES, "overall"]:
         assert cov["observed"][name][0] == pytest.approx(ref[name])
 
 
 def test_calibration_bad_input(tmp_path):
-    mean, std, truth = constructed()
-    with pytest.raises(ValueError, match="shapes differ"):
-        plot_calibration(mean, std, truth[:-1], tmp_path / "x.png")
+    z = gaussian_zscores(*constructed())
+    with pytest.raises(ValueError, match="expected shape"):
+        plot_calibration(z[0], tmp_path / "x.png")
     with pytest.raises(ValueError, match="names"):
-        plot_calibration(mean, std, truth, tmp_path / "x.png", names=["mass"])
-    with pytest.raises(ValueError, match="mean: empty"):
-        plot_calibration(np.zeros((0, 5)), np.zeros((0, 5)), np.zeros((0, 5)), tmp_path / "x.png")
-    with pytest.raises(ValueError, match="std: negative"):
-        plot_calibration(mean, -std, truth, tmp_path / "x.png")
-    with pytest.raises(ValueError, match="truth: non-finite"):
-        plot_calibration(mean, std, np.full_like(truth, np.nan), tmp_path / "x.png")
+        plot_calibration(z, tmp_path / "x.png", names=["mass"])
+    with pytest.raises(ValueError, match="zscores: empty"):
+        plot_calibration(np.zeros((0, 5)), tmp_path / "x.png")
+    with pytest.raises(ValueError, match="zscores: NaN"):
+        plot_calibration(np.full_like(z, np.nan), tmp_path / "x.png")
     with pytest.raises(ValueError, match="levels"):
-        calibration_coverage(mean, std, truth, levels=[0.5, 1.0])
+        calibration_coverage(z, levels=[0.5, 1.0])
     assert not (tmp_path / "x.png").exists()

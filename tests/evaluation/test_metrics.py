@@ -2,7 +2,15 @@ import numpy as np
 import pytest
 
 from pushtoknow.common.params import CATALOGUE_GRID, PARAM_NAMES
-from pushtoknow.evaluation.metrics import PriorMeanPredictor, coverage, nrmse, product_nrmse
+from pushtoknow.evaluation.metrics import (
+    PriorMeanPredictor,
+    coverage,
+    gaussian_zscores,
+    impossible_estimates,
+    nrmse,
+    product_nrmse,
+)
+from pushtoknow.testbed.shapes import CATALOGUE_SHAPES, footprint_from_shape
 
 
 def test_nrmse_by_hand():
@@ -32,9 +40,24 @@ def test_prior_mean_on_grid_is_about_0_4():
 def test_coverage_of_calibrated_gaussian():
     rng = np.random.default_rng(1)
     truth = rng.normal(size=(20000, 5))
-    cov = coverage(np.zeros_like(truth), np.ones_like(truth), truth, 0.9)
+    zero, one = np.zeros_like(truth), np.ones_like(truth)
+    cov = coverage(gaussian_zscores(zero, one, truth), 0.9)
     assert cov["overall"] == pytest.approx(0.9, abs=0.01)
-    assert coverage(np.zeros_like(truth), 0.1 * np.ones_like(truth), truth)["mass"] < 0.2
+    assert coverage(gaussian_zscores(zero, 0.1 * one, truth))["mass"] < 0.2
+
+
+def test_impossible_estimates_are_counted():
+    fp = footprint_from_shape(CATALOGUE_SHAPES["rect1"])  # 9 cm square
+    good = [0.5, 0.5, 0.01, -0.01, 1e-3]
+    bad = [
+        [-0.1, 0.5, 0.0, 0.0, 1e-3],  # negative mass
+        [0.5, 0.5, 0.0, 0.0, 0.0],  # zero inertia
+        [0.5, 0.5, 0.06, 0.0, 1e-3],  # CoM outside the footprint
+        [0.2, 0.5, 0.0, 0.0, 2e-3],  # I_z above 0.2 kg · (0.0636 m)² = 8.1e-4
+        [0.5, np.nan, 0.0, 0.0, 1e-3],
+    ]
+    mean = np.array([[good, *bad], [good] * 6])
+    assert impossible_estimates(mean, [fp, fp]) == len(bad)
 
 
 def test_product_nrmse_zero_when_product_right():

@@ -38,6 +38,7 @@ def test_summary_folds_and_release_share():
     run = HeldoutRun(
         mean=mean,
         std=np.full_like(mean, 0.01),
+        zscore=(truth[:, None] - mean) / 0.01,
         product=mean[..., 0] * mean[..., 1],
         truth=truth,
         ids=[str(i) for i in range(6)],
@@ -51,6 +52,8 @@ def test_summary_folds_and_release_share():
     assert s["nrmse"]["mass"]["std"] == np.std(per_fold)
     assert s["nrmse"]["overall"]["all"] == nrmse(mean[:, 1], truth)["overall"]
     assert s["release_share"] == 0.5
+    inside = np.abs(truth - mean[:, 1]) <= 1.6448536 * 0.01
+    assert s["coverage90"] == inside.mean()
     assert s["prior_nrmse"] == nrmse(mean[:, 0], truth)
 
 

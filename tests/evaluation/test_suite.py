@@ -73,6 +73,7 @@ def test_evaluate_cli_reduced_config(tmp_path_factory, tmp_path):
         assert all(np.isfinite(v) for v in m["nrmse"].values()), name
         assert 0.0 <= m["coverage90"] <= 1.0
         assert len(m["per_push"]) == 3  # prior + 2 pushes
+        assert 0 <= m["impossible_estimates"] <= m["estimates"] == 4 * 3  # objects × (1 + pushes)
     # every method starts from the same prior-mean estimate at k = 0 except the filter's prior
     assert methods["forest"]["per_push"][0] == methods["prior-mean"]["per_push"][0]
     full = json.loads((out / "results.json").read_text())

@@ -5,7 +5,7 @@ import torch
 from shapely.geometry import Point, Polygon
 
 from pushtoknow.common.errors import ShapeError
-from pushtoknow.common.params import PARAM_NAMES, denormalise_params
+from pushtoknow.common.params import PARAM_NAMES, denormalise_params, normalise_param
 from pushtoknow.filters import (
     ComInFootprintConstraint,
     DualFilter,
@@ -55,14 +55,15 @@ def test_padded_polygon_and_closest_point():
 
 def test_positivity_bounds_are_the_si_floors():
     c = ParamPositivityConstraint(pose_dim=3)
-    states = torch.full((1, 1, 8), -10.0, dtype=F64)
+    # m, μ, I_z are filtered in log space, so the floors lie far out (−6.9 for 1 g of mass)
+    states = torch.full((1, 1, 8), -100.0, dtype=F64)
     proj = c.project(states, None)
     si = denormalise_params(proj[0, 0, 3:])
     for name in ("mass", "friction", "inertia"):
         assert si[PARAM_NAMES.index(name)].item() == pytest.approx(c.floors_si[name])
     assert c.is_valid(proj, None).all() and not c.is_valid(states, None).any()
     # c_x, c_y are not bounded by this constraint
-    assert proj[0, 0, 5] == -10.0
+    assert proj[0, 0, 5] == -100.0
 
 
 @pytest.mark.parametrize("polygon", [TRIANGLE, L_SHAPE])
@@ -119,8 +120,8 @@ class SpyObservation(ObservationModel):
 def invalid_heavy_belief(batch):
     """Mean near the bounds: about half the sigma points violate some constraint."""
     mean = torch.zeros(batch, 8, dtype=F64)
-    mean[:, 3] = -1.4  # mass ≈ 0 kg
-    mean[:, 4] = -3.0  # friction ≈ 0
+    mean[:, 3] = normalise_param("mass", 1e-3)  # on the positivity floors (log space)
+    mean[:, 4] = normalise_param("friction", 1e-2)
     mean[:, 5] = 2.0  # c_x = 0.04 m: near the triangle's edge
     cov = torch.diag(torch.tensor([1e-6, 1e-6, 1e-4, 0.1, 0.1, 1.0, 1.0, 0.1], dtype=F64))
     return mean, cov.expand(batch, 8, 8).clone()

@@ -76,7 +76,7 @@ def uniform_run(model, spec):
     return infer(model, spec, "uniform", seed=0)
 
 
-def check_estimate(e, index):
+def check_estimate(e, index, spec=None):
     assert e.index == index
     assert e.mean.shape == e.std.shape == e.mean_norm.shape == (5,)
     assert e.cov_norm.shape == (5, 5)
@@ -84,6 +84,13 @@ def check_estimate(e, index):
         assert np.isfinite(a).all()
     assert (e.std > 0).all()
     np.testing.assert_allclose(e.cov_norm, e.cov_norm.T, atol=1e-6)
+    # physically possible, whatever the (tiny, barely trained) model believes
+    positive = [PARAM_NAMES.index(k) for k in ("mass", "friction", "inertia")]
+    lo, hi = e.interval(0.9)
+    assert (e.mean[positive] > 0).all() and (lo[positive] > 0).all() and (lo <= hi).all()
+    if spec is not None:  # the CoM lies inside the footprint (seen at 9 mm per pixel)
+        com = e.mean[[PARAM_NAMES.index("com_x"), PARAM_NAMES.index("com_y")]]
+        assert spec.footprint.contains(com, margin=-0.005)
 
 
 def test_infer_object_two_pushes(model, spec, uniform_run):
@@ -94,7 +101,7 @@ def test_infer_object_two_pushes(model, spec, uniform_run):
     for k, (e, rec, poses) in enumerate(
         zip(result.estimates, result.records, result.poses, strict=True)
     ):
-        check_estimate(e, k + 1)
+        check_estimate(e, k + 1, spec)
         assert e.push == rec.push and e.push.speed == model.info["push_speed"]
         assert len(rec.time) == SAMPLES and poses.shape == (SAMPLES, 3)
         assert np.isfinite(poses).all()
@@ -113,7 +120,8 @@ def test_json_has_the_documented_keys(spec, uniform_run):
         assert list(p["estimate"]) == list(PARAM_NAMES)
         assert list(PARAM_NAMES) == ["mass", "friction", "com_x", "com_y", "inertia"]
         for v in p["estimate"].values():
-            assert set(v) == {"mean", "std"} and v["std"] > 0
+            assert set(v) == {"mean", "std", "interval90"} and v["std"] > 0
+            assert v["interval90"][0] <= v["interval90"][1]
     assert set(report["pushes"][0]["push"]) == {"contact", "direction", "profile", "speed"}
     truth = spec.params
     assert report["truth"] == {

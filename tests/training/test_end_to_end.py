@@ -152,9 +152,12 @@ def test_split_by_object_keeps_objects_apart(pushes):
 def test_tiny_training_run_writes_everything(tiny_run_dir):
     for name in ("model.pt", "config.yaml", "training.json"):
         assert (tiny_run_dir / name).is_file(), name
-    for stage in ("visnet", "supervised", "end_to_end", "calibration"):
+    for stage in ("visnet", "supervised", "end_to_end", "calibration", "sequence_calibration"):
         rows = list(csv.DictReader(open(tiny_run_dir / f"{stage}.csv")))
         assert rows, stage
+    rows = list(csv.DictReader(open(tiny_run_dir / "sequence_calibration.csv")))
+    assert [float(r["weight"]) for r in rows] == [0.0, 1.0]
+    assert all(math.isfinite(float(r["nll_log_mu_m"])) for r in rows)
     rows = list(csv.DictReader(open(tiny_run_dir / "calibration.csv")))
     assert len(rows) == TINY_CALIBRATION_GRID
     assert all(math.isfinite(float(r["param_nll"])) for r in rows)
@@ -172,4 +175,5 @@ def test_tiny_training_run_writes_everything(tiny_run_dir):
     assert model.inference.num_sigma_points == cfg.inference_sigma_points
     assert model.inference.noise_scale in cfg.calibration.noise_scales
     assert model.inference.update_every in cfg.calibration.update_every
+    assert set(model.inference.evidence_weights) <= set(cfg.sequence_calibration.weights)
     assert model.info == info

@@ -540,15 +540,21 @@ def _estimate_table(estimate, truth, title: str) -> Table:
     t = Table(title=title, title_justify="left")
     t.add_column("parameter")
     t.add_column("estimate (mean ± std)", justify="right")
+    t.add_column("90% interval", justify="right")
     if truth is not None:
         t.add_column("truth", justify="right")
-        t.add_column("|error| / std", justify="right")
+        t.add_column("|z| (>1.64: outside)", justify="right")
+        zscores = abs(estimate.zscore(truth))
+    lo, hi = estimate.interval(0.9)
     for j, name in enumerate(PARAM_NAMES):
-        row = [name, _format_estimate(estimate.mean[j], estimate.std[j], name)]
+        scale, unit = DISPLAY_UNITS[name]
+        row = [
+            name,
+            _format_estimate(estimate.mean[j], estimate.std[j], name),
+            f"{lo[j] * scale:.3g} – {hi[j] * scale:.3g}",
+        ]
         if truth is not None:
-            scale, unit = DISPLAY_UNITS[name]
-            z = abs(estimate.mean[j] - truth[j]) / max(estimate.std[j], 1e-12)
-            row += [f"{truth[j] * scale:.3g} {unit}".strip(), f"{z:.1f}"]
+            row += [f"{truth[j] * scale:.3g} {unit}".strip(), f"{zscores[j]:.1f}"]
         t.add_row(*row)
     return t
 

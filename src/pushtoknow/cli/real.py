@@ -101,8 +101,8 @@ def _print_report(report: dict, error_rows, model_ref: str) -> None:
     console.print(t)
     header, rows = error_rows(report)
     t = Table(title="|estimate − truth| / catalogue range", title_justify="left")
-    for i, h in enumerate(header):
-        t.add_column(h, justify="left" if i == 0 else "right", no_wrap=i == 0)
+    for i, h in enumerate(header):  # parameter names in full, even in a narrow terminal
+        t.add_column(h, justify="left" if i == 0 else "right", no_wrap=i == 0, min_width=len(h))
     for r in rows:
         t.add_row(*r)
     console.print(t)

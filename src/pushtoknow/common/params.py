@@ -60,34 +60,102 @@ class ObjectParams:
         return asdict(self)
 
 
+# How each parameter is filtered: m, μ and I_z in log space (positive by construction, and
+# μ·m is linear there: log μ + log m), the CoM linearly (docs/DESIGN.md).
+LOG_PARAMS: frozenset[str] = frozenset({"mass", "friction", "inertia"})
+_IS_LOG = np.array([k in LOG_PARAMS for k in PARAM_NAMES])
+
+
 def _bounds() -> tuple[np.ndarray, np.ndarray]:
+    """(5,) catalogue bounds in the filtering space (log for LOG_PARAMS)."""
     lo = np.array([PARAM_RANGES[k][0] for k in PARAM_NAMES])
     hi = np.array([PARAM_RANGES[k][1] for k in PARAM_NAMES])
-    return lo, hi
+    return (
+        np.where(_IS_LOG, np.log(np.where(_IS_LOG, lo, 1.0)), lo),
+        np.where(_IS_LOG, np.log(np.where(_IS_LOG, hi, 1.0)), hi),
+    )
+
+
+def _affine(like) -> tuple:
+    """(offset, scale, is_log) with filtering-space value = offset + scale · normalised."""
+    lo, hi = _bounds()
+    offset, scale, is_log = 0.5 * (lo + hi), 0.5 * (hi - lo), _IS_LOG
+    if not isinstance(like, np.ndarray):  # torch tensor
+        import torch
+
+        offset, scale = like.new_tensor(offset), like.new_tensor(scale)
+        is_log = torch.as_tensor(is_log, device=like.device)
+    return offset, scale, is_log
 
 
 def normalise_params(phi):
-    """SI (..., 5) → normalised (..., 5), each catalogue range mapped to [-1, 1].
+    """SI (..., 5) → normalised (..., 5): each catalogue range mapped to [-1, 1], m, μ and I_z
+    through their logarithm. Works on numpy arrays and torch tensors alike."""
+    offset, scale, is_log = _affine(phi)
+    if isinstance(phi, np.ndarray):
+        space = np.where(is_log, np.log(np.where(is_log, phi, 1.0)), phi)
+    else:
+        import torch
 
-    Works on numpy arrays and torch tensors alike.
-    """
-    lo, hi = _bounds()
-    if not isinstance(phi, np.ndarray):  # torch tensor
-        lo = phi.new_tensor(lo)
-        hi = phi.new_tensor(hi)
-    return 2.0 * (phi - lo) / (hi - lo) - 1.0
+        space = torch.where(is_log, torch.log(torch.where(is_log, phi, torch.ones_like(phi))), phi)
+    return (space - offset) / scale
 
 
 def denormalise_params(z):
-    """Normalised (..., 5) → SI (..., 5). Inverse of `normalise_params`."""
-    lo, hi = _bounds()
-    if not isinstance(z, np.ndarray):
-        lo = z.new_tensor(lo)
-        hi = z.new_tensor(hi)
-    return lo + (z + 1.0) * 0.5 * (hi - lo)
+    """Normalised (..., 5) → SI (..., 5), the inverse of `normalise_params`: m, μ and I_z are
+    positive for every finite z."""
+    offset, scale, is_log = _affine(z)
+    space = offset + scale * z
+    if isinstance(z, np.ndarray):
+        return np.where(is_log, np.exp(np.where(is_log, space, 0.0)), space)
+    import torch
+
+    safe = torch.where(is_log, space, torch.zeros_like(space))
+    return torch.where(is_log, torch.exp(safe), space)
 
 
-def param_scale() -> np.ndarray:
-    """(5,) half-range of each parameter: d(SI)/d(normalised). Converts normalised std to SI."""
-    lo, hi = _bounds()
-    return 0.5 * (hi - lo)
+def space_scale() -> np.ndarray:
+    """(5,) d(filtering-space value)/d(normalised): the half-width of each catalogue range in
+    the space the parameter is filtered in (log for m, μ, I_z)."""
+    return _affine(np.zeros(len(PARAM_NAMES)))[1]
+
+
+def linear_param_affine(name: str) -> tuple[float, float]:
+    """(offset, scale) with SI = offset + scale · normalised, for a parameter filtered
+    linearly (the CoM coordinates)."""
+    if name in LOG_PARAMS:
+        raise ValueError(f"{name} is filtered in log space, not linearly")
+    lo, hi = PARAM_RANGES[name]
+    return 0.5 * (lo + hi), 0.5 * (hi - lo)
+
+
+def normalise_param(name: str, value: float) -> float:
+    """One parameter value in SI → its normalised coordinate."""
+    phi = np.array([PARAM_RANGES[k][0] for k in PARAM_NAMES], dtype=np.float64)
+    phi[PARAM_NAMES.index(name)] = value
+    return float(normalise_params(phi)[PARAM_NAMES.index(name)])
+
+
+def si_moments(mean_norm: np.ndarray, cov_norm: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """SI mean and std (5,) of a Gaussian belief N(mean_norm (5,), cov_norm (5, 5)) over the
+    normalised parameters: log-normal moments for m, μ and I_z, affine ones for the CoM."""
+    offset, scale, is_log = _affine(np.asarray(mean_norm, dtype=np.float64))
+    m = offset + scale * np.asarray(mean_norm, dtype=np.float64)
+    v = scale**2 * np.clip(np.diagonal(np.asarray(cov_norm, dtype=np.float64)), 0.0, None)
+    log_mean = np.exp(np.where(is_log, m + 0.5 * v, 0.0))
+    mean = np.where(is_log, log_mean, m)
+    std = np.where(is_log, log_mean * np.sqrt(np.expm1(np.where(is_log, v, 0.0))), np.sqrt(v))
+    return mean, std
+
+
+def product_moments(mean_norm: np.ndarray, cov_norm: np.ndarray) -> tuple[float, float]:
+    """Mean and std of μ·m (kg) under a Gaussian belief over the normalised parameters:
+    log μ + log m is Gaussian, so μ·m is log-normal."""
+    offset, scale, _ = _affine(np.asarray(mean_norm, dtype=np.float64))
+    i, j = PARAM_NAMES.index("mass"), PARAM_NAMES.index("friction")
+    w = np.zeros(len(PARAM_NAMES))
+    w[[i, j]] = scale[[i, j]]
+    mu = float(offset[i] + offset[j] + w @ np.asarray(mean_norm, dtype=np.float64))
+    var = max(float(w @ np.asarray(cov_norm, dtype=np.float64) @ w), 0.0)
+    mean = float(np.exp(mu + 0.5 * var))
+    return mean, mean * float(np.sqrt(np.expm1(var)))

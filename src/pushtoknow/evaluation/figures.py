@@ -393,43 +393,33 @@ def plot_nrmse_vs_pushes(
 
 
 def calibration_coverage(
-    mean: np.ndarray,
-    std: np.ndarray,
-    truth: np.ndarray,
+    zscores: np.ndarray,
     names: Sequence[str] | None = None,
     levels: Sequence[float] = CALIBRATION_LEVELS,
 ) -> dict:
-    """Observed coverage of the central Gaussian intervals mean ± z_p·std, z_p = Φ⁻¹(½ + p/2),
-    for each nominal level p: the share of objects with |truth − mean| ≤ z_p·std (the same rule
-    as `metrics.coverage`).
+    """Observed coverage of the central intervals at each nominal level p: the share of objects
+    whose truth's z-score (in the space where the belief is Gaussian: `metrics.coverage`) has
+    |z| ≤ Φ⁻¹(½ + p/2).
 
-    mean, std, truth: (N, P) in any consistent units (SI); std ≥ 0. names: the P parameter names
-    (default PARAM_NAMES). levels: nominal levels in (0, 1).
-    Returns {"levels": [p, ...], "observed": {name: [share per level], ..., "overall": [share over
-    all N·P values]}, "miscalibration": {name: mean |observed − p| over the levels, ...,
-    "overall"}, "objects": N} — plain floats, ready for JSON."""
-    mean, std, truth = (np.asarray(a, dtype=float) for a in (mean, std, truth))
-    for what, a in (("mean", mean), ("std", std), ("truth", truth)):
-        if a.size == 0:
-            raise ValueError(f"{what}: empty")
-        if a.ndim != 2:
-            raise ValueError(f"{what}: expected shape (N, P), got {a.shape}")
-        if not np.isfinite(a).all():
-            raise ValueError(f"{what}: non-finite values")
-    if not mean.shape == std.shape == truth.shape:
-        raise ValueError(
-            f"mean {mean.shape}, std {std.shape} and truth {truth.shape}: shapes differ"
-        )
-    if (std < 0).any():
-        raise ValueError("std: negative standard deviations")
-    names = _names(names, mean.shape[1], "mean")
+    zscores: (N, P); names: the P parameter names (default PARAM_NAMES). levels: nominal levels
+    in (0, 1). Returns {"levels": [p, ...], "observed": {name: [share per level], ...,
+    "overall": [share over all N·P values]}, "miscalibration": {name: mean |observed − p| over
+    the levels, ..., "overall"}, "objects": N} — plain floats, ready for JSON."""
+    zscores = np.asarray(zscores, dtype=float)
+    if zscores.size == 0:
+        raise ValueError("zscores: empty")
+    if zscores.ndim != 2:
+        raise ValueError(f"zscores: expected shape (N, P), got {zscores.shape}")
+    if np.isnan(zscores).any():
+        raise ValueError("zscores: NaN values")
+    names = _names(names, zscores.shape[1], "zscores")
     p = np.asarray(levels, dtype=float).reshape(-1)
     if p.size == 0:
         raise ValueError("levels: empty")
     if ((p <= 0) | (p >= 1)).any():
         raise ValueError(f"levels: must lie in (0, 1), got {p.tolist()}")
     z = norm.ppf(0.5 + p / 2)  # (L,)
-    inside = np.abs(truth - mean)[None] <= z[:, None, None] * std[None]  # (L, N, P)
+    inside = np.abs(zscores)[None] <= z[:, None, None]  # (L, N, P)
     per = inside.mean(axis=1)  # (L, P)
     overall = inside.mean(axis=(1, 2))  # (L,)
     observed = {n: per[:, j].tolist() for j, n in enumerate(names)}
@@ -439,14 +429,12 @@ def calibration_coverage(
         "levels": p.tolist(),
         "observed": observed,
         "miscalibration": mis,
-        "objects": int(mean.shape[0]),
+        "objects": int(zscores.shape[0]),
     }
 
 
 def plot_calibration(
-    mean: np.ndarray,
-    std: np.ndarray,
-    truth: np.ndarray,
+    zscores: np.ndarray,
     path: Path | str,
     names: Sequence[str] | None = None,
     title: str = "",
@@ -455,13 +443,13 @@ def plot_calibration(
     figsize: tuple[float, float] = (5.4, 4.0),
     dpi: int = DPI,
 ) -> dict:
-    """Reliability plot of the posterior's Gaussian intervals: observed coverage versus nominal
-    level p (0.05 … 0.95 by default) per parameter and overall, with the diagonal (perfect
+    """Reliability plot of the posterior's intervals: observed coverage versus nominal level p
+    (0.05 … 0.95 by default) per parameter and overall, with the diagonal (perfect
     calibration; below it = overconfident, above = underconfident).
 
-    mean, std, truth: (N, P) SI, one row per object; names: the P parameter names (default
+    zscores: (N, P) of the truth, one row per object; names: the P parameter names (default
     PARAM_NAMES). Returns `calibration_coverage(...)` for the caller's JSON."""
-    cov = calibration_coverage(mean, std, truth, names, levels)
+    cov = calibration_coverage(zscores, names, levels)
     p = np.asarray(cov["levels"])
     fig = _figure(figsize, dpi)
     ax = fig.add_subplot()

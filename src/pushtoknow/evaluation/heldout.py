@@ -13,17 +13,19 @@ from dataclasses import dataclass
 import numpy as np
 
 from pushtoknow.baselines.random_forest import features_from_records
-from pushtoknow.common.params import denormalise_params, param_scale
+from pushtoknow.common.params import product_moments
 from pushtoknow.evaluation.metrics import coverage, nrmse, product_nrmse
 
 
 @dataclass
 class HeldoutRun:
     """Per object (N) and push (K + 1, index 0 = the prior): mean (N, K+1, 5) SI,
-    std (N, K+1, 5) SI, product (N, K+1) E[μ·m], truth (N, 5), ids (N,)."""
+    std (N, K+1, 5) SI, zscore (N, K+1, 5) of the truth in the belief's normalised space
+    (`PushEstimate.zscore`), product (N, K+1) E[μ·m], truth (N, 5), ids (N,)."""
 
     mean: np.ndarray
     std: np.ndarray
+    zscore: np.ndarray
     product: np.ndarray
     truth: np.ndarray
     ids: list[str]
@@ -31,13 +33,6 @@ class HeldoutRun:
     features_truth: np.ndarray | None = None  # (N, K, F) forest features, true poses
     features_vision: np.ndarray | None = None  # (N, K, F) forest features, filtered poses
     profiles: list[list[str]] | None = None  # (N, K) speed profile of each executed push
-
-
-def expected_product(mean_norm: np.ndarray, cov_norm: np.ndarray) -> float:
-    """E[m·μ] (SI) under a Gaussian belief in normalised units: m̄μ̄ + Cov(m, μ)."""
-    scale = param_scale()
-    mean_si = denormalise_params(np.asarray(mean_norm))
-    return float(mean_si[0] * mean_si[1] + cov_norm[0, 1] * scale[0] * scale[1])
 
 
 def _run_one(args) -> dict:
@@ -80,7 +75,8 @@ def _run_one(args) -> dict:
         "id": spec.name if object_ref.lstrip().startswith("{") else object_ref,
         "mean": np.stack([e.mean for e in rows]),
         "std": np.stack([e.std for e in rows]),
-        "product": np.array([expected_product(e.mean_norm, e.cov_norm) for e in rows]),
+        "zscore": np.stack([e.zscore(spec.params.as_array()) for e in rows]),
+        "product": np.array([product_moments(e.mean_norm, e.cov_norm)[0] for e in rows]),
         "truth": spec.params.as_array(),
         "seconds": time.perf_counter() - t0,
         "profiles": [rec.push.profile for rec in res.records],
@@ -130,6 +126,7 @@ def evaluate_heldout(
     return HeldoutRun(
         mean=np.stack([r["mean"] for r in out]),
         std=np.stack([r["std"] for r in out]),
+        zscore=np.stack([r["zscore"] for r in out]),
         product=np.stack([r["product"] for r in out]),
         truth=np.stack([r["truth"] for r in out]),
         ids=[r["id"] for r in out],
@@ -147,11 +144,11 @@ def heldout_metrics(run: HeldoutRun, prior_truth: np.ndarray | None = None) -> d
     k = run.mean.shape[1]
     per_push = []
     for j in range(k):
-        m, s = run.mean[:, j], run.std[:, j]
+        m = run.mean[:, j]
         row = {"push": j, **nrmse(m, run.truth)}
         row["mu_m"] = product_nrmse(m, run.truth, run.product[:, j])
-        row["coverage90"] = coverage(m, s, run.truth, 0.9)
-        row["coverage68"] = coverage(m, s, run.truth, 0.68)
+        row["coverage90"] = coverage(run.zscore[:, j], 0.9)
+        row["coverage68"] = coverage(run.zscore[:, j], 0.68)
         per_push.append(row)
     if prior_truth is not None:
         prior_mean = np.asarray(prior_truth).mean(0)

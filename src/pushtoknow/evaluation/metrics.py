@@ -46,13 +46,42 @@ def product_nrmse(
     return float(np.sqrt(np.mean((p - t) ** 2)) / (hi - lo))
 
 
-def coverage(mean: np.ndarray, std: np.ndarray, truth: np.ndarray, level: float = 0.9) -> dict:
-    """Share of objects whose truth lies within mean ± z·std, z the two-sided `level` quantile."""
-    z = norm.ppf(0.5 + level / 2)
-    inside = np.abs(np.asarray(truth) - np.asarray(mean)) <= z * np.asarray(std)
+def gaussian_zscores(mean: np.ndarray, std: np.ndarray, truth: np.ndarray) -> np.ndarray:
+    """(truth − mean) / std: z-scores of a method whose belief is Gaussian in SI units."""
+    return (np.asarray(truth) - np.asarray(mean)) / np.maximum(np.asarray(std), 1e-300)
+
+
+def coverage(zscores: np.ndarray, level: float = 0.9) -> dict:
+    """Share of objects whose truth lies in the method's equal-tailed `level` interval, from
+    z-scores (N, P) of the truth in the space where the method's belief is Gaussian (SI for
+    the forest and the prior, normalised parameters for the filter: `PushEstimate.zscore`)."""
+    inside = np.abs(np.asarray(zscores)) <= norm.ppf(0.5 + level / 2)
     out = {k: float(v) for k, v in zip(PARAM_NAMES, inside.mean(0))}
     out["overall"] = float(inside.mean())
     return out
+
+
+def impossible_estimates(mean: np.ndarray, footprints: list) -> int:
+    """How many estimates (object, push) describe no possible object: m, μ or I_z not positive,
+    the CoM outside the object's footprint, or I_z above the most any mass distribution inside
+    the footprint can have (m · max ‖p − c‖²). mean: (N, K, 5) SI; footprints: N
+    `testbed.shapes.Footprint` (the true ones)."""
+    idx = {k: PARAM_NAMES.index(k) for k in PARAM_NAMES}
+    count = 0
+    for est, fp in zip(np.asarray(mean, dtype=float), footprints, strict=True):
+        for e in est:
+            m, mu, iz = e[idx["mass"]], e[idx["friction"]], e[idx["inertia"]]
+            com = (e[idx["com_x"]], e[idx["com_y"]])
+            possible = (
+                np.isfinite(e).all()
+                and m > 0
+                and mu > 0
+                and iz > 0
+                and fp.contains(com)
+                and iz <= m * fp.max_radius_from(com) ** 2
+            )
+            count += not possible
+    return count
 
 
 class PriorMeanPredictor:

@@ -52,7 +52,7 @@ def summarise_condition(run: HeldoutRun, folds: Sequence[np.ndarray]) -> dict:
     """NRMSE after the last push (mean ± std over `folds` of the objects, and over all),
     μ·m NRMSE, 90% coverage and the share of release pushes."""
     k = run.mean.shape[1] - 1
-    mean, std, truth = run.mean[:, k], run.std[:, k], run.truth
+    mean, truth = run.mean[:, k], run.truth
     per_fold = [nrmse(mean[f], truth[f]) for f in folds]
     keys = [*PARAM_NAMES, "overall"]
     profiles = [p for obj in (run.profiles or []) for p in obj]
@@ -66,7 +66,7 @@ def summarise_condition(run: HeldoutRun, folds: Sequence[np.ndarray]) -> dict:
             for key in keys
         },
         "mu_m": product_nrmse(mean, truth, run.product[:, k]),
-        "coverage90": coverage(mean, std, truth, 0.9)["overall"],
+        "coverage90": coverage(run.zscore[:, k], 0.9)["overall"],
         "release_share": float(np.mean([p == "release" for p in profiles])) if profiles else 0.0,
         "seconds_per_object_median": float(np.median(run.seconds)),
         "prior_nrmse": nrmse(run.mean[:, 0], truth),

@@ -69,7 +69,7 @@ import h5py
 import numpy as np
 
 from pushtoknow.common.errors import DatasetError
-from pushtoknow.common.params import GRAVITY, PARAM_NAMES, PARAM_RANGES, param_scale
+from pushtoknow.common.params import GRAVITY, PARAM_NAMES, PARAM_RANGES, product_moments
 from pushtoknow.datasets.mit_import import IMPORT_FILE
 from pushtoknow.datasets.mit_push import mit_object
 from pushtoknow.datasets.shards import list_shards, read_shard
@@ -301,14 +301,6 @@ def _errors(pred: np.ndarray, truth: np.ndarray) -> dict:
     return out
 
 
-def _product_moments(mean_si: np.ndarray, cov_si: np.ndarray) -> tuple[float, float]:
-    """E and std of m·μ for jointly Gaussian (m, μ) with the given SI mean and covariance."""
-    a, b = float(mean_si[0]), float(mean_si[1])
-    va, vb, c = float(cov_si[0, 0]), float(cov_si[1, 1]), float(cov_si[0, 1])
-    var = a * a * vb + b * b * va + 2 * a * b * c + va * vb + c * c
-    return a * b + c, math.sqrt(max(var, 0.0))
-
-
 def _product_range() -> float:
     lo = PARAM_RANGES["mass"][0] * PARAM_RANGES["friction"][0]
     hi = PARAM_RANGES["mass"][1] * PARAM_RANGES["friction"][1]
@@ -452,10 +444,7 @@ def estimate_real_object(
 
     # ---- learned filter ----------------------------------------------------------------------
     prior, estimates, pose_err = _run_filter(model, records, camera, seed, num_sigma_points)
-    scale = param_scale()  # normalised → SI
-    filt_mu_m = [
-        _product_moments(e.mean, e.cov_norm * np.outer(scale, scale)) for e in [prior, *estimates]
-    ]
+    filt_mu_m = [product_moments(e.mean_norm, e.cov_norm) for e in [prior, *estimates]]
 
     # ---- forest and prior mean -------------------------------------------------------------
     X, Y, obj_idx = _training_features(Path(forest_data))

@@ -40,7 +40,15 @@ from pushtoknow.baselines.random_forest import ForestBaseline, ForestConfig, fea
 from pushtoknow.common.config import Config
 from pushtoknow.common.params import PARAM_NAMES
 from pushtoknow.evaluation.heldout import HeldoutRun, evaluate_heldout
-from pushtoknow.evaluation.metrics import PriorMeanPredictor, coverage, nrmse, product_nrmse
+from pushtoknow.evaluation.metrics import (
+    PriorMeanPredictor,
+    coverage,
+    gaussian_zscores,
+    impossible_estimates,
+    nrmse,
+    product_nrmse,
+)
+from pushtoknow.testbed.objects import load_object_spec
 
 PRIOR = "prior-mean"
 FOREST = "forest"
@@ -65,7 +73,9 @@ class EvaluationConfig(Config):
 @dataclass
 class MethodRun:
     """Estimates of one method on one set: mean, std (N, K+1, 5) SI after k = 0..K pushes,
-    product (N, K+1) E[μ·m] or None (then m̄·μ̄), truth (N, 5), ids (N,)."""
+    product (N, K+1) E[μ·m] or None (then m̄·μ̄), truth (N, 5), ids (N,); zscore
+    (N, K+1, 5) of the truth where the belief is not Gaussian in SI (the filter's), else None
+    (then (truth − mean) / std)."""
 
     mean: np.ndarray
     std: np.ndarray
@@ -73,6 +83,13 @@ class MethodRun:
     ids: list[str]
     product: np.ndarray | None = None
     seconds_per_object: float | None = None
+    zscore: np.ndarray | None = None
+
+    def zscores(self, k: int) -> np.ndarray:
+        """(N, 5) z-scores of the truth after push k."""
+        if self.zscore is not None:
+            return self.zscore[:, k]
+        return gaussian_zscores(self.mean[:, k], self.std[:, k], self.truth)
 
 
 def fold_indices(n: int, folds: int, seed: int) -> list[np.ndarray]:
@@ -83,15 +100,19 @@ def fold_indices(n: int, folds: int, seed: int) -> list[np.ndarray]:
     return [np.sort(g) for g in np.array_split(perm, folds)]
 
 
-def summarise_method(run: MethodRun, folds: list[np.ndarray]) -> dict:
+def summarise_method(
+    run: MethodRun, folds: list[np.ndarray], footprints: list | None = None
+) -> dict:
     """NRMSE of the final estimate (mean ± std over folds, and over all objects), μ·m NRMSE,
-    68%/90% coverage, and NRMSE after every push k = 0..K (all objects)."""
+    68%/90% coverage, NRMSE after every push k = 0..K (all objects), and, given the objects'
+    true footprints, how many of the N·(K+1) estimates were physically impossible."""
     k_last = run.mean.shape[1] - 1
-    m, s, t = run.mean[:, k_last], run.std[:, k_last], run.truth
+    m, t = run.mean[:, k_last], run.truth
     prod = None if run.product is None else run.product[:, k_last]
     per_fold = [nrmse(m[g], t[g]) for g in folds]
     keys = [*PARAM_NAMES, "overall"]
-    cov68, cov90 = coverage(m, s, t, 0.68), coverage(m, s, t, 0.9)
+    z = run.zscores(k_last)
+    cov68, cov90 = coverage(z, 0.68), coverage(z, 0.9)
     per_push = []
     for k in range(k_last + 1):
         p = None if run.product is None else run.product[:, k]
@@ -112,6 +133,10 @@ def summarise_method(run: MethodRun, folds: list[np.ndarray]) -> dict:
         "per_push": per_push,
         "objects": len(t),
         "seconds_per_object": run.seconds_per_object,
+        "estimates": int(run.mean.shape[0] * run.mean.shape[1]),
+        "impossible_estimates": None
+        if footprints is None
+        else impossible_estimates(run.mean, footprints),
     }
 
 
@@ -159,6 +184,7 @@ def _save_run(path: Path, key: str, run: HeldoutRun) -> None:
         key=key,
         mean=run.mean,
         std=run.std,
+        zscore=run.zscore,
         product=run.product,
         truth=run.truth,
         ids=np.array(run.ids),
@@ -178,6 +204,7 @@ def _load_run(path: Path, key: str) -> HeldoutRun | None:
         return HeldoutRun(
             mean=f["mean"],
             std=f["std"],
+            zscore=f["zscore"],
             product=f["product"],
             truth=f["truth"],
             ids=[str(i) for i in f["ids"]],
@@ -276,6 +303,7 @@ def run_evaluation(
     runs_for_figures: dict[str, dict[str, MethodRun]] = {}
     for set_name, objects in sets.items():
         folds = fold_indices(len(objects), cfg.folds, cfg.seed)
+        footprints = [load_object_spec(o).footprint for o in objects]
         methods: dict[str, MethodRun] = {}
         for i, (model, name) in enumerate(zip(models, names)):
             for policy in cfg.policies if i == 0 else cfg.policies[:1]:
@@ -291,6 +319,7 @@ def run_evaluation(
                     run.ids,
                     run.product,
                     float(np.median(run.seconds)),
+                    run.zscore,
                 )
                 if i == 0 and policy == cfg.policies[0]:
                     base = run
@@ -308,7 +337,9 @@ def run_evaluation(
         results["sets"][set_name] = {
             "objects": base.ids,
             "folds": cfg.folds,
-            "methods": {k: summarise_method(r, folds) for k, r in methods.items()},
+            "methods": {
+                k: summarise_method(r, folds, footprints) for k, r in methods.items()
+            },
         }
         runs_for_figures[set_name] = methods
     results["methods"] = results["sets"]["heldout"]["methods"]
@@ -396,6 +427,6 @@ def write_figures(
     )
     k_last = primary.mean.shape[1] - 1
     cal_path = out / "calibration.png"
-    F.plot_calibration(primary.mean[:, k_last], primary.std[:, k_last], primary.truth, cal_path)
+    F.plot_calibration(primary.zscores(k_last), cal_path)
     paths["calibration"] = str(cal_path)
     return paths

@@ -16,7 +16,7 @@ from collections.abc import Sequence
 import torch
 
 from pushtoknow.common.errors import ShapeError
-from pushtoknow.common.params import PARAM_NAMES, PARAM_RANGES
+from pushtoknow.common.params import PARAM_NAMES, linear_param_affine, normalise_param
 
 
 class StateConstraint(ABC):
@@ -29,18 +29,6 @@ class StateConstraint(ABC):
     @abstractmethod
     def project(self, states: torch.Tensor, context: object) -> torch.Tensor:
         """states (B, C, D) → (B, C, D), every row valid; valid rows unchanged."""
-
-
-def _param_affine(name: str) -> tuple[float, float]:
-    """(offset, scale) with SI = offset + scale · normalised for parameter `name`."""
-    lo, hi = PARAM_RANGES[name]
-    return 0.5 * (lo + hi), 0.5 * (hi - lo)
-
-
-def si_to_normalised(name: str, value: float) -> float:
-    """One parameter value in SI → normalised coordinate (see `common.params`)."""
-    offset, scale = _param_affine(name)
-    return (value - offset) / scale
 
 
 class BoxConstraint(StateConstraint):
@@ -78,7 +66,8 @@ class ParamPositivityConstraint(BoxConstraint):
     """m > 0, μ > 0, I_z > 0 (SI), as lower bounds on the normalised parameters.
 
     A strict inequality has no closest point, so each bound is a small positive SI floor
-    (defaults: 1 g, μ 0.01, 1e-6 kg·m²), mapped to normalised units with the catalogue ranges.
+    (defaults: 1 g, μ 0.01, 1e-6 kg·m²), mapped to normalised units (`common.params`; with
+    m, μ and I_z filtered in log space every finite state satisfies them already).
     pose_dim: number of pose components before the parameters in the state.
     """
 
@@ -90,7 +79,7 @@ class ParamPositivityConstraint(BoxConstraint):
     ):
         floors = floors_si if floors_si is not None else DEFAULT_POSITIVE_FLOORS_SI
         lower = {
-            pose_dim + list(param_names).index(name): si_to_normalised(name, floor)
+            pose_dim + list(param_names).index(name): normalise_param(name, floor)
             for name, floor in floors.items()
         }
         super().__init__(lower=lower)
@@ -202,7 +191,7 @@ class ComInFootprintConstraint(StateConstraint):
         self.com_indices = com_indices
         self.footprint_attr = footprint_attr
         self.margin_m = margin_m
-        affine = [_param_affine(n) for n in com_names]
+        affine = [linear_param_affine(n) for n in com_names]
         self._offset = tuple(a[0] for a in affine)
         self._scale = tuple(a[1] for a in affine)
 

@@ -26,12 +26,20 @@ from typing import Literal
 import numpy as np
 import torch
 from pydantic import Field
+from scipy.stats import norm
 
 from pushtoknow.active.policies import ActivePolicy
 from pushtoknow.common.camera import CameraModel
 from pushtoknow.common.config import Config
-from pushtoknow.common.params import PARAM_NAMES, denormalise_params, param_scale
+from pushtoknow.common.params import (
+    PARAM_NAMES,
+    denormalise_params,
+    normalise_params,
+    si_moments,
+)
+from pushtoknow.filters.constraints import project_into_polygon
 from pushtoknow.geometry.affordances import mask_contour, sample_push_affordances
+from pushtoknow.models.calibration import keep_evidence
 from pushtoknow.models.checkpoint import TrainedModel
 from pushtoknow.models.learned import PushContext
 from pushtoknow.testbed.config import SimConfig
@@ -67,10 +75,16 @@ def profile_speeds(sim_config: SimConfig) -> dict[str, float]:
     return {"constant": sim_config.push.speed, "release": sim_config.push.release_peak_speed}
 
 
+INTERVAL_LEVEL = 0.9  # the interval every estimate reports
+COM_SLICE = slice(PARAM_NAMES.index("com_x"), PARAM_NAMES.index("com_y") + 1)
+COM_MARGIN_M = 0.001  # a reported CoM lies at least this far inside the footprint seen
+
+
 @dataclass
 class PushEstimate:
-    """The parameter belief after push `index` (1-based; 0 = the prior). mean/std in SI
-    (PARAM_NAMES order); mean_norm (K,), cov_norm (K, K) in normalised units."""
+    """The parameter belief after push `index` (1-based; 0 = the prior): Gaussian over the
+    normalised parameters, mean_norm (K,), cov_norm (K, K); mean/std (K,) are its SI moments
+    (log-normal for m, μ and I_z, so always positive), in PARAM_NAMES order."""
 
     index: int
     mean: np.ndarray
@@ -79,10 +93,29 @@ class PushEstimate:
     cov_norm: np.ndarray
     push: Push | None = None
 
+    @property
+    def std_norm(self) -> np.ndarray:
+        return np.sqrt(np.clip(np.diagonal(self.cov_norm), 0.0, None))
+
+    def interval(self, level: float = INTERVAL_LEVEL) -> tuple[np.ndarray, np.ndarray]:
+        """Equal-tailed SI interval (lo, hi) (K,) holding `level` of the belief (asymmetric
+        for m, μ and I_z)."""
+        k = float(norm.ppf(0.5 + level / 2))
+        lo = denormalise_params(self.mean_norm - k * self.std_norm)
+        return lo, denormalise_params(self.mean_norm + k * self.std_norm)
+
+    def zscore(self, truth: np.ndarray) -> np.ndarray:
+        """(K,) standardised error of an SI truth in the belief's own (normalised) space: the
+        truth lies in the level-L interval iff |zscore| ≤ the two-sided L quantile."""
+        z = normalise_params(np.asarray(truth, dtype=np.float64))
+        return (z - self.mean_norm) / np.maximum(self.std_norm, 1e-12)
+
     def as_dict(self) -> dict:
+        lo, hi = self.interval()
+        key = f"interval{round(100 * INTERVAL_LEVEL)}"
         return {
-            n: {"mean": float(m), "std": float(s)}
-            for n, m, s in zip(PARAM_NAMES, self.mean, self.std, strict=True)
+            n: {"mean": float(m), "std": float(s), key: [float(a), float(b)]}
+            for n, m, s, a, b in zip(PARAM_NAMES, self.mean, self.std, lo, hi, strict=True)
         }
 
 
@@ -126,12 +159,11 @@ def _push_dict(p: Push) -> dict:
 
 
 def belief_to_estimate(index: int, mean: torch.Tensor, cov: torch.Tensor, push=None):
-    """Normalised parameter belief (K,), (K, K) → `PushEstimate` in SI."""
-    m = mean.detach().double()
-    c = cov.detach().double()
-    si = denormalise_params(m).numpy()
-    std = np.sqrt(np.clip(torch.diagonal(c).numpy(), 0, None)) * param_scale()
-    return PushEstimate(index, si, std, m.numpy(), c.numpy(), push)
+    """Normalised parameter belief (K,), (K, K) → `PushEstimate` (SI moments)."""
+    m = mean.detach().double().numpy()
+    c = cov.detach().double().numpy()
+    si, std = si_moments(m, c)
+    return PushEstimate(index, si, std, m, c, push)
 
 
 def choose_push(
@@ -188,6 +220,7 @@ class ObjectEstimator:
         self.param_cov = model.prior.cov.clone()
         self._prev: tuple[np.ndarray, np.ndarray] | None = None  # (S_0, pose0) of last push
         self._last_pose: np.ndarray | None = None
+        self._footprint: torch.Tensor | None = None  # (V, 2) object frame, from the last S_0
 
     def start_belief(self, pose0: np.ndarray) -> tuple[torch.Tensor, torch.Tensor]:
         """Belief (mean (1, D), cov (1, D, D)) at a push's start: N(pose0, init std²) × the
@@ -211,6 +244,7 @@ class ObjectEstimator:
         b = len(pushes)
         mask0 = torch.as_tensor(s0, dtype=torch.float32)[None, None].expand(b, -1, -1, -1)
         fp = torch.as_tensor(footprint_from_mask(s0, self.camera, pose0), dtype=torch.float32)
+        self._footprint = fp
         return PushContext(
             mask0=mask0,
             pose0=torch.as_tensor(pose0, dtype=torch.float32)[None].expand(b, -1),
@@ -222,7 +256,16 @@ class ObjectEstimator:
         )
 
     def estimate(self, index: int, push: Push | None = None) -> PushEstimate:
-        return belief_to_estimate(index, self.param_mean, self.param_cov, push)
+        """The parameter belief as an estimate. m, μ and I_z are positive by construction
+        (log space); the reported CoM mean is kept inside the footprint seen in S_0 (projected
+        1 mm inside if the Gaussian's mean falls outside, as the mean of the belief restricted
+        to the footprint would)."""
+        est = belief_to_estimate(index, self.param_mean, self.param_cov, push)
+        if self._footprint is not None:
+            com = torch.as_tensor(est.mean[COM_SLICE], dtype=torch.float32)[None, None]
+            inside = project_into_polygon(com, self._footprint[None], COM_MARGIN_M)
+            est.mean[COM_SLICE] = inside[0, 0].double().numpy()
+        return est
 
     @torch.no_grad()
     def start_pose(self, view: View, initial_pose: np.ndarray | None) -> np.ndarray:
@@ -275,8 +318,12 @@ class ObjectEstimator:
                 )
                 mean, cov, _ = filt.update(mean, cov, z, ctx, noise)
             poses.append(mean[0, :3].numpy().copy())
-        self.param_mean = mean[0, 3:].clone()
-        self.param_cov = cov[0, 3:, 3:].clone()
+        weights = torch.tensor(self.model.inference.evidence_weights)
+        param_mean, param_cov = keep_evidence(
+            self.param_mean[None], self.param_cov[None], mean[:, 3:], cov[:, 3:, 3:], weights
+        )
+        self.param_mean = param_mean[0].clone()
+        self.param_cov = param_cov[0].clone()
         self._prev = (s0, pose0)
         self._last_pose = mean[0, :3].double().numpy()
         return np.stack(poses)

@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Literal
 
 import torch
-from pydantic import Field
+from pydantic import Field, field_validator
 
 import pushtoknow
 from pushtoknow.common.camera import CameraModel
@@ -32,7 +32,7 @@ from pushtoknow.models.learned import (
 from pushtoknow.models.networks import VisNet, VisNetConfig
 
 CHECKPOINT_FORMAT = "pushtoknow-checkpoint"
-CHECKPOINT_VERSION = 1
+CHECKPOINT_VERSION = 2  # 2: m, μ and I_z normalised through their logarithm (common.params)
 CHECKPOINT_FILE = "model.pt"
 
 Variant = Literal["vt-addf", "vt-jdf", "v-ddf"]
@@ -76,11 +76,21 @@ def _first_rows(index: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
 class InferenceSettings(Config):
     """How the trained filter runs at inference (calibrated on validation pushes after
     training). update_every: apply the measurement update at every n-th 10 Hz sample only
-    (prediction runs at every sample); noise_scale: factor on the learned R."""
+    (prediction runs at every sample); noise_scale: factor on the learned R;
+    evidence_weights: the share of each push's evidence the parameter belief keeps, per
+    direction of `models.calibration.DIRECTIONS` (1: the filter's posterior as it is)."""
 
     update_every: int = Field(1, ge=1)
     noise_scale: float = Field(1.0, gt=0)
     num_sigma_points: int = Field(100, ge=10)
+    evidence_weights: tuple[float, float, float, float, float] = (1.0, 1.0, 1.0, 1.0, 1.0)
+
+    @field_validator("evidence_weights")
+    @classmethod
+    def _in_unit_interval(cls, v):
+        if not all(0.0 <= w <= 1.0 for w in v):
+            raise ValueError(f"evidence weights must lie in [0, 1], got {list(v)}")
+        return v
 
 
 @dataclass

@@ -6,7 +6,10 @@ Stages (SPEC §3.6), each logged to a CSV file in the run directory:
 3. supervised warm-up of the filter's networks on ground-truth transitions (`supervised.csv`);
 4. end to end through the filter on truncated windows (`end_to_end.csv`), best validation kept;
 5. calibration of the inference settings (R scale, update stride) on validation pushes by the
-   NLL of the true parameters after a whole push (`calibration.csv`).
+   NLL of the true parameters after a whole push (`calibration.csv`);
+6. the share of each push's evidence the parameter belief keeps, per direction, on whole
+   push sequences of the validation objects (`sequence_calibration.csv`,
+   `training.calibration`).
 Objects are split into training and validation sets by object (`val_fraction`).
 """
 
@@ -38,6 +41,7 @@ from pushtoknow.models.checkpoint import (
 )
 from pushtoknow.models.learned import LearnedModelsConfig
 from pushtoknow.testbed.config import SimConfig, check_testbed_version
+from pushtoknow.training.calibration import SequenceCalibrationConfig, calibrate_evidence
 from pushtoknow.training.data import (
     PushTensors,
     compute_vision_poses,
@@ -69,6 +73,7 @@ class TrainConfig(Config):
     supervised: SupervisedConfig = SupervisedConfig(steps=1500)
     end_to_end: EndToEndConfig = EndToEndConfig()
     calibration: CalibrationConfig = CalibrationConfig()
+    sequence_calibration: SequenceCalibrationConfig = SequenceCalibrationConfig()
     inference_sigma_points: int = Field(100, ge=10)
 
 
@@ -269,6 +274,18 @@ def train_model(
             update={"num_sigma_points": cfg.inference_sigma_points}
         )
         timings["calibration_s"] = time.perf_counter() - t0
+
+        # 6. how much of each push's evidence to keep, on validation push sequences
+        t0 = time.perf_counter()
+        model.inference = calibrate_evidence(
+            model,
+            val,
+            cfg.sequence_calibration,
+            seed,
+            CsvLog(out / "sequence_calibration.csv", echo),
+            bar,
+        )
+        timings["sequence_calibration_s"] = time.perf_counter() - t0
 
     timings["total_s"] = time.perf_counter() - t_start
     model.info.update(

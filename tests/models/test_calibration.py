@@ -1,0 +1,72 @@
+"""Keeping part of a push's evidence: exact at the ends, interpolating, PSD, physics basis."""
+
+import numpy as np
+import pytest
+import torch
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from pushtoknow.common.errors import ShapeError
+from pushtoknow.common.params import PARAM_NAMES, space_scale
+from pushtoknow.models.calibration import evidence_basis, keep_evidence
+from pushtoknow.models.checkpoint import InferenceSettings
+
+F64 = torch.float64
+
+
+def random_belief(rng, b=3):
+    a = torch.as_tensor(rng.normal(size=(b, 5, 5)), dtype=F64) * 0.3
+    cov = a @ a.transpose(-1, -2) + 0.01 * torch.eye(5, dtype=F64)
+    return torch.as_tensor(rng.normal(size=(b, 5)), dtype=F64), cov
+
+
+def test_basis_is_orthonormal_and_its_first_direction_is_log_mu_m():
+    r = evidence_basis().double()
+    torch.testing.assert_close(r @ r.T, torch.eye(5, dtype=F64), atol=1e-6, rtol=0)
+    # log μm = s_m z_m + s_μ z_μ + const: e1 is that gradient's direction, e2 leaves μ·m as is
+    s = space_scale()
+    i, j = PARAM_NAMES.index("mass"), PARAM_NAMES.index("friction")
+    e1, e2 = r[0].numpy(), r[1].numpy()
+    assert e1[i] / e1[j] == pytest.approx(s[i] / s[j], rel=1e-5)
+    assert s[i] * e2[i] + s[j] * e2[j] == pytest.approx(0.0, abs=1e-6)
+
+
+def test_weight_one_is_the_posterior_and_zero_the_prior():
+    rng = np.random.default_rng(0)
+    m0, c0 = random_belief(rng)
+    m1, c1 = random_belief(rng)
+    m, c = keep_evidence(m0, c0, m1, c1, torch.ones(5, dtype=F64))
+    torch.testing.assert_close(m, m1)
+    torch.testing.assert_close(c, c1)
+    m, c = keep_evidence(m0, c0, m1, c1, torch.zeros(5, dtype=F64))
+    torch.testing.assert_close(m, m0)
+    r = evidence_basis().double()  # the prior's marginals in the basis come back
+    def marginals(cov):
+        return torch.diagonal(r @ cov @ r.T, dim1=-2, dim2=-1)
+
+    torch.testing.assert_close(marginals(c), marginals(c0))
+
+
+@settings(max_examples=50, deadline=None)
+@given(seed=st.integers(0, 10_000), w=st.lists(st.floats(0.0, 1.0), min_size=5, max_size=5))
+def test_kept_belief_is_between_prior_and_posterior_and_psd(seed, w):
+    rng = np.random.default_rng(seed)
+    m0, c0 = random_belief(rng)
+    m1, c1 = random_belief(rng)
+    weights = torch.tensor(w, dtype=F64)
+    m, c = keep_evidence(m0, c0, m1, c1, weights)
+    r = evidence_basis().double()
+    y, y0, y1 = m @ r.T, m0 @ r.T, m1 @ r.T
+    torch.testing.assert_close(y, y0 + weights * (y1 - y0))
+    assert torch.linalg.eigvalsh(c).min() > -1e-9
+    torch.testing.assert_close(c, c.transpose(-1, -2))
+
+
+def test_shapes_and_weights_are_checked():
+    m, c = torch.zeros(2, 5), torch.eye(5).expand(2, 5, 5)
+    with pytest.raises(ShapeError, match="weights"):
+        keep_evidence(m, c, m, c, torch.ones(4))
+    with pytest.raises(ShapeError, match="cov1"):
+        keep_evidence(m, c, m, c[:1], torch.ones(5))
+    with pytest.raises(ValueError, match=r"\[0, 1\]"):
+        InferenceSettings(evidence_weights=(1.0, 1.0, 1.5, 1.0, 1.0))
