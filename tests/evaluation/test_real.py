@@ -193,7 +193,7 @@ def test_report_truth_and_errors(report, forest_dir):
     assert mm["truth"] == pytest.approx(obj.mass * t["friction"])
     assert mm["forest"][-1] == pytest.approx(f["mass"]["mean"] * f["friction"]["mean"])
     assert all(s["std"] > 0 for s in mm["filter"])
-    # Notes: friction below the catalogue, speed mismatch, SPEC §3.8.
+    # Notes: friction below the catalogue, speed mismatch, what quasi-static pushes reveal.
     notes = " ".join(report["notes"])
     assert "friction truth" in notes and "OUTSIDE" in notes
     assert "speed mismatch" in notes and "μ·m" in notes

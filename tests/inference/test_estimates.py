@@ -49,3 +49,21 @@ def test_interval_is_asymmetric_in_si_and_holds_its_level():
     inside = (draws >= lo) & (draws <= hi)
     np.testing.assert_allclose(inside.mean(0), 0.9, atol=0.01)
     assert np.allclose(normalise_params(lo)[m], -1.6448536 * 0.5)
+
+
+def test_reported_com_is_kept_a_margin_inside_even_in_a_notch():
+    from shapely.geometry import Point, Polygon
+
+    from pushtoknow.inference.session import keep_inside
+
+    ell = np.array([[0, 0], [0.1, 0], [0.1, 0.04], [0.04, 0.04], [0.04, 0.1], [0, 0.1]]) - 0.03
+    poly = Polygon(ell)
+    margin = 0.009
+    inside = np.array([0.0, -0.01])  # deep inside: unchanged
+    np.testing.assert_array_equal(keep_inside(inside, ell, margin), inside)
+    for p in ([0.03, 0.03], [0.012, 0.012], [0.2, -0.2], [-0.029, 0.0]):  # notch, edge, far
+        q = keep_inside(np.array(p), ell, margin)
+        assert poly.contains(Point(*q))
+        assert poly.exterior.distance(Point(*q)) >= margin - 1e-6
+    thin = np.array([[0, 0], [0.01, 0], [0.01, 0.001], [0, 0.001]])
+    np.testing.assert_allclose(keep_inside(np.array([1.0, 1.0]), thin, margin), [0.005, 0.0005])

@@ -46,11 +46,24 @@ def test_loads_are_nonnegative_sum_to_one_and_balance_at_the_com(shape, u, v):
 
     if not poly.contains(Point(*com)):
         return
-    pts = support_points(fp, 0.016, MARGIN)
+    pts = support_points(fp, 0.016, MARGIN, com)
     w = support_loads(pts, com)
     assert (w >= 0).all()
     assert w.sum() == pytest.approx(1.0, abs=1e-12)
     np.testing.assert_allclose(w @ pts, com, atol=2e-5)
+
+
+def test_corner_com_gets_corner_supports_and_others_keep_theirs():
+    fp = footprint_from_shape(CATALOGUE_SHAPES["rect2"])
+    corner = (0.0393, 0.0505)  # 5 mm inside the corner diagonal: beyond the ring's hull
+    plain = support_points(fp, 0.016, MARGIN)
+    with pytest.raises(ValueError, match="outside their hull"):
+        support_loads(plain, corner)
+    more = support_points(fp, 0.016, MARGIN, corner)
+    assert len(more) == len(plain) + 4
+    np.testing.assert_allclose(support_loads(more, corner) @ more, corner, atol=2e-5)
+    # a CoM the plain supports carry changes nothing (the catalogue's physics is unchanged)
+    np.testing.assert_array_equal(support_points(fp, 0.016, MARGIN, (0.01, 0.02)), plain)
 
 
 def test_a_com_the_supports_cannot_carry_is_refused():

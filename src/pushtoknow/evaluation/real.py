@@ -433,13 +433,13 @@ def estimate_real_object(
         [ref.mass, np.nan if mu_true is None else mu_true, 0.0, 0.0, ref.inertia], dtype=float
     )
     truth_source = {
-        "mass": f"MIT Push catalogue ({real['shape']}, stainless steel, SPEC §3.9)",
+        "mass": f"MIT Push catalogue ({real['shape']}, stainless steel)",
         "friction": "measured from the pushes: " + fric["rule"]
         if mu_true is not None
         else "none: no push is a pure translation",
-        "com_x": "footprint centroid (SPEC §3.9)",
-        "com_y": "footprint centroid (SPEC §3.9)",
-        "inertia": f"MIT Push catalogue ({real['shape']}, SPEC §3.9)",
+        "com_x": "footprint centroid (MIT Push objects are uniform)",
+        "com_y": "footprint centroid (MIT Push objects are uniform)",
+        "inertia": f"MIT Push catalogue ({real['shape']})",
     }
 
     # ---- learned filter ----------------------------------------------------------------------
@@ -560,7 +560,7 @@ def _notes(truth, pushes, train_speed, model, mu_true) -> list[str]:
             "real pushes include dynamic content (impacts, stick-slip, sliding after release)"
         )
     notes.append(
-        "SPEC §3.8: quasi-static pushing reveals μ·m (force) and the CoM (motion), not m and "
+        "docs/PHYSICS.md: quasi-static pushing reveals μ·m (force) and the CoM (motion), not m and "
         "μ separately, and I_z barely: compare μ·m rather than mass or friction alone"
     )
     return notes

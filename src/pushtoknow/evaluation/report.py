@@ -1,7 +1,8 @@
 """docs/RESULTS.md from the results of `run_evaluation` (plus optional real-data results):
 tables of NRMSE (mean ± std over folds) and coverage per method and object set, the paper's
 numbers beside ours, NRMSE after each push per method, figures, the machine, commands and seeds,
-and an interpretation in the light of SPEC §3.8. Every number in it comes from the results."""
+and an interpretation in the light of the testbed's physics (docs/PHYSICS.md). Every number in
+it comes from the results."""
 
 from __future__ import annotations
 
@@ -9,7 +10,7 @@ from pathlib import Path
 
 from pushtoknow.common.params import PARAM_NAMES
 
-# SPEC §3.7: the paper's Sim-Robotac NRMSE (Table III).
+# The paper's Sim-Robotac NRMSE (Table III).
 PAPER_NRMSE = {
     "VT-ADDF (paper)": {
         "mass": 0.21,
@@ -36,20 +37,25 @@ def _cell(mean: float, std: float | None = None) -> str:
 
 
 def method_table(methods: dict, order: list[str] | None = None) -> str:
-    """Markdown table: NRMSE per parameter and overall (mean ± std over folds), μ·m, coverage."""
+    """Markdown table: NRMSE per parameter and overall (mean ± std over folds), μ·m, coverage,
+    impossible estimates (of all N·(K+1)), seconds per object."""
     lines = [
-        "| method | " + " | ".join(HEADERS) + " | μ·m | cov 68% | cov 90% | s/object |",
-        "|---" * (len(HEADERS) + 5) + "|",
+        "| method | "
+        + " | ".join(HEADERS)
+        + " | μ·m | cov 68% | cov 90% | impossible | s/object |",
+        "|---" * (len(HEADERS) + 6) + "|",
     ]
     for name in order or list(methods):
         m = methods[name]
         cells = [_cell(m["nrmse"][k], m["nrmse_std"][k]) for k in COLUMNS]
         sec = m.get("seconds_per_object")
+        bad = m.get("impossible_estimates")
+        bad = "" if bad is None else f"{bad}/{m['estimates']}"
         lines.append(
             f"| {name} | "
             + " | ".join(cells)
             + f" | {_cell(m['mu_m'], m['mu_m_std'])} | {m['coverage68']:.2f} | "
-            + f"{m['coverage90']:.2f} | {'' if sec is None else f'{sec:.1f}'} |"
+            + f"{m['coverage90']:.2f} | {bad} | {'' if sec is None else f'{sec:.1f}'} |"
         )
     return "\n".join(lines)
 
@@ -77,8 +83,9 @@ def per_push_table(methods: dict, param: str) -> str:
     return "\n".join(lines)
 
 
-def interpretation(methods: dict, primary: str) -> str:
-    """A paragraph reading the held-out numbers in the light of SPEC §3.8."""
+def interpretation(methods: dict, primary: str, novel: dict | None = None) -> str:
+    """A paragraph reading the held-out numbers (and, given, the novel ones) in the light of
+    the testbed's physics (docs/PHYSICS.md)."""
     p, prior = methods[primary], methods["prior-mean"]
     n, pn = p["nrmse"], prior["nrmse"]
 
@@ -90,7 +97,7 @@ def interpretation(methods: dict, primary: str) -> str:
         f"After {len(p['per_push']) - 1} pushes, {primary} changes the prior-mean predictor's "
         f"NRMSE by {change('mass')} for mass, {change('friction')} for friction, "
         f"{change('com_x')} for c_x, {change('com_y')} for c_y and {change('inertia')} for I_z; "
-        f"the product μ·m, which is what a quasi-static push's force measures (SPEC §3.8), "
+        f"the product μ·m, which is what a quasi-static push's force measures, "
         f"falls from {prior['mu_m']:.3f} to {p['mu_m']:.3f}.",
     ]
     if n["friction"] >= pn["friction"] or n["mass"] >= 0.8 * pn["mass"]:
@@ -119,21 +126,34 @@ def interpretation(methods: dict, primary: str) -> str:
         )
         if fn["mass"] < 0.7 * n["mass"] and fn["friction"] < 0.7 * n["friction"]:
             text.append(
-                f"The forest does separate m ({fn['mass']:.3f}) from μ ({fn['friction']:.3f}) "
-                "on these same pushes, so they hold dynamic content our filter leaves unused "
-                "(the forest's features include the force early and late in contact; which of "
-                "them carries m we have not isolated); making the filter's networks read it is "
-                "the first thing to fix."
+                f"The forest separates m ({fn['mass']:.3f}) from μ ({fn['friction']:.3f}) on "
+                "these catalogue objects although constant pushes carry only μ·m: the twelve "
+                "products μ·m of the catalogue grid are all distinct, so a regressor can read "
+                "m and μ off the grid value of μ·m."
             )
+            if novel is not None and "forest" in novel:
+                nf, np_ = novel["forest"]["nrmse"], novel["prior-mean"]["nrmse"]
+                text.append(
+                    f"On the novel objects (continuous parameters) that trick fails: the "
+                    f"forest's μ NRMSE is {nf['friction']:.3f} against the prior's "
+                    f"{np_['friction']:.3f}."
+                )
         if fn["com_x"] > 0.85 * pn["com_x"]:
             text.append(
                 "The forest cannot place the CoM (near the prior for c_x and c_y): that needs "
                 "the motion read in the object's frame, which is what the filter does."
             )
+    verdict = (
+        "within 5 points of nominal"
+        if abs(p["coverage90"] - 0.9) <= 0.05
+        else "below nominal: the posterior is overconfident"
+        if p["coverage90"] < 0.9
+        else "above nominal: the intervals are wider than they need be"
+    )
     text.append(
         f"Calibration: {100 * p['coverage90']:.0f}% of the true parameters fall inside "
-        f"{primary}'s 90% intervals ({100 * p['coverage68']:.0f}% inside the 68% ones); "
-        "below nominal means the posterior is overconfident."
+        f"{primary}'s 90% intervals ({100 * p['coverage68']:.0f}% inside the 68% ones), "
+        f"{verdict}."
     )
     return " ".join(text)
 
@@ -178,7 +198,11 @@ def render_report(results: dict, command: str, appendices: list[str] = ()) -> st
         "Protocol (see `pushtoknow.evaluation.suite`): NRMSE = RMSE / catalogue range, mean ± "
         "std over folds of the evaluation objects (the learned models are trained once, on the "
         "catalogue's training split, so the spread is over objects, not training runs); "
-        "coverage = share of (object, parameter) pairs inside the Gaussian interval.",
+        "coverage = share of (object, parameter) pairs inside the method's equal-tailed interval "
+        "(the filter's is Gaussian in its normalised, log-space parameters, so asymmetric in SI; "
+        "the forest's and the prior's are Gaussian in SI); impossible = estimates (objects × "
+        "(pushes + 1)) with m, μ or I_z not positive, the CoM outside the true footprint or I_z "
+        "above m·max‖p − c‖².",
         "",
     ]
     for set_name, title in (("heldout", "Held-out catalogue objects"), ("novel", "Novel objects")):
@@ -206,7 +230,8 @@ def render_report(results: dict, command: str, appendices: list[str] = ()) -> st
     out += ["## Figures", ""]
     for name, path in results["figures"].items():
         out += [f"**{name}**", "", f"![{name}](figures/{Path(path).name})", ""]
-    out += ["", "## Interpretation", "", interpretation(held, primary), ""]
+    novel = results["sets"].get("novel", {}).get("methods")
+    out += ["", "## Interpretation", "", interpretation(held, primary, novel), ""]
     for a in appendices:
         out += [a.strip(), ""]
     return "\n".join(out)

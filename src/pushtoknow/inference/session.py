@@ -37,7 +37,6 @@ from pushtoknow.common.params import (
     normalise_params,
     si_moments,
 )
-from pushtoknow.filters.constraints import project_into_polygon
 from pushtoknow.geometry.affordances import mask_contour, sample_push_affordances
 from pushtoknow.models.calibration import keep_evidence
 from pushtoknow.models.checkpoint import TrainedModel
@@ -77,7 +76,7 @@ def profile_speeds(sim_config: SimConfig) -> dict[str, float]:
 
 INTERVAL_LEVEL = 0.9  # the interval every estimate reports
 COM_SLICE = slice(PARAM_NAMES.index("com_x"), PARAM_NAMES.index("com_y") + 1)
-COM_MARGIN_M = 0.001  # a reported CoM lies at least this far inside the footprint seen
+COM_MARGIN_PX = 1.0  # a reported CoM lies this many pixels inside the footprint seen in S_0
 
 
 @dataclass
@@ -158,6 +157,27 @@ def _push_dict(p: Push) -> dict:
     }
 
 
+def keep_inside(point: np.ndarray, polygon: np.ndarray, margin: float) -> np.ndarray:
+    """(2,) point moved to the nearest point at least `margin` (m) inside polygon (V, 2), or
+    returned unchanged if it already is; for a polygon too thin for the margin, its centroid."""
+    from shapely.geometry import Point, Polygon
+
+    poly = Polygon(polygon).buffer(0)  # a resampled outline may touch itself
+    inner = poly.buffer(-margin)
+    p = Point(*point)
+    if inner.is_empty:
+        return np.asarray(poly.centroid.coords[0])
+    if inner.contains(p):
+        return np.asarray(point, dtype=np.float64)
+    if inner.geom_type != "Polygon":
+        inner = min(inner.geoms, key=lambda g: g.distance(p))
+    ring = inner.exterior
+    q = np.asarray(ring.interpolate(ring.project(p)).coords[0])
+    # a hair inside the eroded region, so the point is strictly inside the footprint
+    c = np.asarray(inner.representative_point().coords[0])
+    return q + 1e-6 * (c - q) / max(np.linalg.norm(c - q), 1e-12)
+
+
 def belief_to_estimate(index: int, mean: torch.Tensor, cov: torch.Tensor, push=None):
     """Normalised parameter belief (K,), (K, K) → `PushEstimate` (SI moments)."""
     m = mean.detach().double().numpy()
@@ -220,7 +240,7 @@ class ObjectEstimator:
         self.param_cov = model.prior.cov.clone()
         self._prev: tuple[np.ndarray, np.ndarray] | None = None  # (S_0, pose0) of last push
         self._last_pose: np.ndarray | None = None
-        self._footprint: torch.Tensor | None = None  # (V, 2) object frame, from the last S_0
+        self._footprint: torch.Tensor | None = None  # (V, 2) object frame, first push's S_0
 
     def start_belief(self, pose0: np.ndarray) -> tuple[torch.Tensor, torch.Tensor]:
         """Belief (mean (1, D), cov (1, D, D)) at a push's start: N(pose0, init std²) × the
@@ -244,7 +264,8 @@ class ObjectEstimator:
         b = len(pushes)
         mask0 = torch.as_tensor(s0, dtype=torch.float32)[None, None].expand(b, -1, -1, -1)
         fp = torch.as_tensor(footprint_from_mask(s0, self.camera, pose0), dtype=torch.float32)
-        self._footprint = fp
+        if self._footprint is None:  # the first push's view defines the object frame exactly;
+            self._footprint = fp  # later ones depend on the estimated start θ
         return PushContext(
             mask0=mask0,
             pose0=torch.as_tensor(pose0, dtype=torch.float32)[None].expand(b, -1),
@@ -257,14 +278,15 @@ class ObjectEstimator:
 
     def estimate(self, index: int, push: Push | None = None) -> PushEstimate:
         """The parameter belief as an estimate. m, μ and I_z are positive by construction
-        (log space); the reported CoM mean is kept inside the footprint seen in S_0 (projected
-        1 mm inside if the Gaussian's mean falls outside, as the mean of the belief restricted
-        to the footprint would)."""
+        (log space); the reported CoM mean is kept inside the footprint seen in the first
+        push's S_0 (the view that defines the object frame), at least
+        a pixel from its outline (a 64 px mask rounds a notch's corner by about a pixel): if
+        the Gaussian's mean lies closer to the outline or outside, it is moved to the nearest
+        such point, as the mean of the belief restricted to the footprint would be."""
         est = belief_to_estimate(index, self.param_mean, self.param_cov, push)
         if self._footprint is not None:
-            com = torch.as_tensor(est.mean[COM_SLICE], dtype=torch.float32)[None, None]
-            inside = project_into_polygon(com, self._footprint[None], COM_MARGIN_M)
-            est.mean[COM_SLICE] = inside[0, 0].double().numpy()
+            margin = COM_MARGIN_PX * self.camera.metres_per_pixel()
+            est.mean[COM_SLICE] = keep_inside(est.mean[COM_SLICE], self._footprint.numpy(), margin)
         return est
 
     @torch.no_grad()

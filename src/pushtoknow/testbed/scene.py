@@ -4,7 +4,7 @@ and the overhead camera."""
 from __future__ import annotations
 
 import numpy as np
-from shapely.geometry import Point, Polygon, box
+from shapely.geometry import MultiPoint, Point, Polygon, box
 
 from pushtoknow.common.params import GRAVITY
 from pushtoknow.testbed.config import SimConfig
@@ -26,10 +26,14 @@ LOAD_SPRING_REST = -1000.0  # m: a spring this far below loads a support with a 
 SUPPORT_MASS_SHARE = 0.01  # at most this share of the mass sits in the supports (see build_mjcf)
 
 
-def support_points(footprint: Footprint, spacing: float, margin: float) -> np.ndarray:
+def support_points(
+    footprint: Footprint, spacing: float, margin: float, com=None
+) -> np.ndarray:
     """Support points (N, 2), object frame: a grid at `spacing` inside the footprint shrunk by
-    `margin`, plus points every `spacing` along that shrunk outline, so their convex hull is
-    the footprint less `margin` and any CoM inside it can be carried with positive loads."""
+    `margin`, plus points every `spacing` along that shrunk outline. Their convex hull is the
+    footprint less `margin`, except that the ring may cut a sharp corner; if `com` (2,) lies
+    outside the hull, the shrunk outline's vertices are added too, so any CoM inside the
+    footprint less `margin` can be carried with positive loads."""
     poly = footprint.polygon.buffer(-margin)
     if poly.is_empty or poly.area <= 0:
         poly = footprint.polygon.buffer(-0.25 * footprint.polygon.length / len(footprint.vertices))
@@ -45,7 +49,12 @@ def support_points(footprint: Footprint, spacing: float, margin: float) -> np.nd
     ring = poly.exterior
     n_ring = max(3, int(np.ceil(ring.length / spacing)))
     edge = [ring.interpolate(t, normalized=True).coords[0] for t in np.arange(n_ring) / n_ring]
-    return np.array(grid + edge, dtype=np.float64).reshape(-1, 2)
+    pts = np.array(grid + edge, dtype=np.float64).reshape(-1, 2)
+    if com is not None and not MultiPoint([tuple(p) for p in pts]).convex_hull.buffer(
+        1e-9
+    ).contains(Point(*com)):
+        pts = np.vstack([pts, np.asarray(ring.coords[:-1], dtype=np.float64)])
+    return pts
 
 
 def support_loads(points: np.ndarray, com) -> np.ndarray:
@@ -116,7 +125,7 @@ def build_mjcf(spec: ObjectSpec, config: SimConfig) -> str:
     # a rest length 1 km below, constant to 1e-6). The loads are fixed shares centred on the
     # CoM, so the friction of each point is exactly μ·w_i·m·g while it slides and the object
     # neither tilts nor bounces: the planar motion depends on the pressure distribution alone.
-    supports = support_points(spec.footprint, sup.spacing, sup.edge_margin)
+    supports = support_points(spec.footprint, sup.spacing, sup.edge_margin, (p.com_x, p.com_y))
     loads = support_loads(supports, (p.com_x, p.com_y))
     keep = loads > 1e-9
     supports, loads = supports[keep], loads[keep]
