@@ -78,6 +78,7 @@ def tiny_dataset(tmp_path_factory) -> Path:
             seed=DATA_SEED,
             objects_from="catalogue-train",
             sim=SIM,
+            profiles=("constant", "release"),  # the tiny model may be asked for either
         )
         generate_dataset(out, cfg, workers=1, progress=False)
         _cache["data"] = out

@@ -158,6 +158,16 @@ def test_infer_missing_model(tmp_path, monkeypatch, capsys):
     assert out == ""
 
 
+def test_infer_refuses_a_profile_the_model_never_saw(tmp_path, monkeypatch, capsys):
+    # the shipped model was trained on constant pushes only
+    args = ["infer", "--model", "pretrained", "--object", "catalogue:117", "--pushes", "1"]
+    args += ["--profiles", "constant,release", "--out", tmp_path / "X"]
+    code, out, err = run_main(monkeypatch, capsys, *args)
+    assert code == 2 and "after push" not in out + err  # refused before any push
+    assert "profiles release" in err and "constant pushes only" in err
+    assert "Traceback" not in err and not (tmp_path / "X").exists()
+
+
 def test_infer_bad_policy(tmp_path):
     result = invoke(
         "infer", "--model", tmp_path, "--object", "catalogue:117", "--policy", "bogus",

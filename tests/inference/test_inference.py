@@ -226,3 +226,17 @@ def test_choose_push_profiles_for_random_and_active():
         assert only.profile == "constant" and only.speed == speeds["constant"]
     finally:
         ex.close()
+
+
+def test_profiles_the_model_never_saw_are_refused(model, spec):
+    import dataclasses
+
+    constant_only = dataclasses.replace(model, info={**model.info, "profiles": ["constant"]})
+    ex = SimulatedExecutor(spec, SIM, seed=0, recentre=True)
+    try:
+        cfg = InferenceConfig(pushes=1, profiles=("constant", "release"))
+        with pytest.raises(ValueError, match="profiles release: the model was trained on"):
+            infer_object(constant_only, ex, cfg, 0, initial_pose=ex.initial_pose)
+    finally:
+        ex.close()
+    assert sorted(model.info["profiles"]) == ["constant", "release"]  # recorded by training

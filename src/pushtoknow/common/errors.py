@@ -37,3 +37,7 @@ class TestbedVersionError(PushToKnowError, ValueError):
     """Data or a model come from another physics version of the testbed than this one."""
 
     __test__ = False  # not a pytest test class despite its name
+
+
+class UntrainedProfileError(PushToKnowError, ValueError):
+    """Inference asked for a speed profile the model was never trained on."""

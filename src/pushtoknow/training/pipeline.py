@@ -41,6 +41,7 @@ from pushtoknow.models.checkpoint import (
 )
 from pushtoknow.models.learned import LearnedModelsConfig
 from pushtoknow.testbed.config import SimConfig, check_testbed_version
+from pushtoknow.testbed.push import PROFILES
 from pushtoknow.training.calibration import SequenceCalibrationConfig, calibrate_evidence
 from pushtoknow.training.data import (
     PushTensors,
@@ -291,6 +292,7 @@ def train_model(
     model.info.update(
         {
             "variant": cfg.variant,
+            "profiles": sorted({PROFILES[int(i)] for i in pt.action[:, 4].tolist()}),
             "train_objects": int(torch.unique(train.object_index).numel()),
             "val_objects": int(torch.unique(val.object_index).numel()),
             "train_pushes": len(train),
