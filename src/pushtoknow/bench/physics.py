@@ -35,7 +35,7 @@ class PhysicsReport:
         return dataclasses.asdict(self)
 
 
-def run_physics_bench(seed: int = 0, quick: bool = False, with_speed: bool = True) -> PhysicsReport:
+def run_physics_bench(seed: int = 0, quick: bool = False) -> PhysicsReport:
     """All probes; `quick` runs one shape and the grid corners only (for tests)."""
     from pushtoknow.testbed import fidelity as fid
     from pushtoknow.testbed.config import SimConfig
@@ -49,20 +49,18 @@ def run_physics_bench(seed: int = 0, quick: bool = False, with_speed: bool = Tru
     friction_dep = fid.path_dependence("friction", (0.5, *[f for f in frictions if f != 0.5]))
     steady = [fid.steady_force(m, f) for m in masses for f in frictions]
     release_masses = (0.2, 1.2) if quick else (0.2, 0.5, 1.2)
-    release = [fid.release_push(m, f) for m in release_masses for f in frictions]
-    readings = []
+    release, readings = [], []
     for m in release_masses:
         for f in frictions:
-            rec = fid.push_through(fid.probe_object("rect1", m, f), 0.0, "release")
+            rec = fid.release_record(m, f)  # one simulation for the trace and the 10 Hz reading
+            release.append(fid.release_metrics(rec, m, f))
             r = fid.read_release(rec)
             readings.append(
                 {"mass": m, "friction": f, "read_mass": r.mass, "read_friction": r.friction}
             )
-    rtf = None
-    if with_speed:
-        from pushtoknow.bench.sim import run_sim_bench
+    from pushtoknow.bench.sim import run_sim_bench
 
-        rtf = run_sim_bench(pushes=3 if quick else 6, seed=seed)["realtime_factor"]
+    rtf = run_sim_bench(pushes=3 if quick else 6, seed=seed)["realtime_factor"]
     return PhysicsReport(
         getattr(SimConfig(), "testbed_version", 1),
         machine_description(),

@@ -61,7 +61,7 @@ class ObjectParams:
 
 
 # How each parameter is filtered: m, μ and I_z in log space (positive by construction, and
-# μ·m is linear there: log μ + log m), the CoM linearly (docs/DESIGN.md).
+# μ·m is linear there: log μ + log m), the CoM linearly (README, "The filters").
 LOG_PARAMS: frozenset[str] = frozenset({"mass", "friction", "inertia"})
 _IS_LOG = np.array([k in LOG_PARAMS for k in PARAM_NAMES])
 
@@ -125,8 +125,9 @@ def linear_param_affine(name: str) -> tuple[float, float]:
     linearly (the CoM coordinates)."""
     if name in LOG_PARAMS:
         raise ValueError(f"{name} is filtered in log space, not linearly")
-    lo, hi = PARAM_RANGES[name]
-    return 0.5 * (lo + hi), 0.5 * (hi - lo)
+    offset, scale, _ = _affine(np.zeros(len(PARAM_NAMES)))
+    i = PARAM_NAMES.index(name)
+    return float(offset[i]), float(scale[i])
 
 
 def normalise_param(name: str, value: float) -> float:

@@ -222,10 +222,21 @@ class Release:
     slide_samples: int
 
 
+def release_record(mass: float, friction: float, config: SimConfig | None = None) -> PushRecord:
+    """The release push of the probe: centred, on rect1 with the CoM at the centroid."""
+    return push_through(probe_object("rect1", mass, friction), 0.0, "release", config=config)
+
+
 def release_push(mass: float, friction: float, config: SimConfig | None = None) -> Release:
+    return release_metrics(release_record(mass, friction, config), mass, friction, config)
+
+
+def release_metrics(
+    rec: PushRecord, mass: float, friction: float, config: SimConfig | None = None
+) -> Release:
+    """`Release` figures of a `release_record` of an object of this mass and friction."""
     cfg = config or SimConfig()
-    pc = cfg.push
-    rec = push_through(probe_object("rect1", mass, friction), 0.0, "release", config=cfg)
+    pc, rate = cfg.push, cfg.tactile.rate_hz
     tr = rec.trace
     t, f = tr["time"], np.linalg.norm(tr["force"], axis=1)
     v = np.linalg.norm(tr["velocity"][:, :2], axis=1)
@@ -250,8 +261,7 @@ def release_push(mass: float, friction: float, config: SimConfig | None = None) 
         slide / coulomb,
         float(t[rest] - t_brake) / (pc.release_peak_speed / (friction * GRAVITY)),
         1e6 * abs(float(x[-1] - x[rest])),
-        int(math.floor(t[rest] * cfg.tactile.rate_hz) - math.floor(t_brake * cfg.tactile.rate_hz))
-        + 1,
+        int(math.floor(t[rest] * rate) - math.floor(t_brake * rate)) + 1,
     )
 
 
