@@ -47,6 +47,23 @@ def test_summary_matches_hand_computation():
     ]
     inside = np.abs(truth - mean[:, -1]) <= 1.6448536 * std[:, -1]
     assert s["coverage90"] == pytest.approx(inside.mean())
+    assert s["profile_share"] is None
+    chosen = [["constant", "release"], ["release", "release"], ["constant", "constant"]] * 2
+    run = MethodRun(mean, std, truth, [str(i) for i in range(6)], profiles=chosen)
+    assert summarise_method(run, folds)["profile_share"] == {"constant": 0.5, "release": 0.5}
+
+
+def test_method_names_mark_a_structure_other_than_the_first_models():
+    from types import SimpleNamespace
+
+    from pushtoknow.evaluation.suite import _variant_names
+
+    def ckpt(variant, structure):
+        return SimpleNamespace(variant=variant, models_config=SimpleNamespace(structure=structure))
+
+    loaded = [ckpt("vt-addf", "physics"), ckpt("vt-addf", "black-box"), ckpt("v-ddf", "physics")]
+    assert _variant_names(loaded) == ["vt-addf", "vt-addf-black-box", "v-ddf"]
+    assert _variant_names(loaded[:1] * 2) == ["vt-addf", "vt-addf#1"]
 
 
 def test_config_rejects_unknown_keys(tmp_path):
@@ -103,8 +120,10 @@ def test_cache_key_follows_the_checkpoint_contents(tmp_path):
     run.mkdir()
     (run / "model.pt").write_bytes(b"first model")
     cfg = EvaluationConfig()
-    key = _cache_key(run, "uniform", ["catalogue:1"], cfg)
-    assert _cache_key(run, "uniform", ["catalogue:1"], cfg) == key
-    assert _cache_key(run, "random", ["catalogue:1"], cfg) != key
+    c = ("constant",)
+    key = _cache_key(run, "uniform", ["catalogue:1"], cfg, c)
+    assert _cache_key(run, "uniform", ["catalogue:1"], cfg, c) == key
+    assert _cache_key(run, "random", ["catalogue:1"], cfg, c) != key
+    assert _cache_key(run, "uniform", ["catalogue:1"], cfg, ("constant", "release")) != key
     (run / "model.pt").write_bytes(b"retrained model")  # same path, new weights
-    assert _cache_key(run, "uniform", ["catalogue:1"], cfg) != key
+    assert _cache_key(run, "uniform", ["catalogue:1"], cfg, c) != key

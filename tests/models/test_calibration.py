@@ -41,6 +41,7 @@ def test_weight_one_is_the_posterior_and_zero_the_prior():
     m, c = keep_evidence(m0, c0, m1, c1, torch.zeros(5, dtype=F64))
     torch.testing.assert_close(m, m0)
     r = evidence_basis().double()  # the prior's marginals in the basis come back
+
     def marginals(cov):
         return torch.diagonal(r @ cov @ r.T, dim1=-2, dim2=-1)
 

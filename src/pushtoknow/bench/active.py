@@ -28,7 +28,12 @@ from pushtoknow.active.selection import SCORES
 from pushtoknow.bench import machine_description
 from pushtoknow.common.camera import CameraModel
 from pushtoknow.filters.base import FilterConfig
-from pushtoknow.models.learned import LearnedModelsConfig, PushContext, build_filter
+from pushtoknow.models.learned import (
+    LearnedModelsConfig,
+    PushContext,
+    build_filter,
+    with_pad_track,
+)
 from pushtoknow.testbed.config import PushConfig, TactileConfig
 from pushtoknow.testbed.push import PROFILES, Push, pad_positions
 
@@ -74,13 +79,13 @@ def context_builder_for(
     step + 1: pad at time (step + 1) / rate). The pad tracks of a candidate list are computed
     once, on its first step."""
     mask, poly = _disc(camera)
-    times = (np.arange(n_steps) + 1) / rate_hz
+    times = np.arange(n_steps + 1) / rate_hz
     cache: dict[int, tuple] = {}
 
     def build(pushes: Sequence[Push], step: int) -> PushContext:
         key = id(pushes)
         if key not in cache:
-            tracks = np.stack([pad_positions(p, times, push_cfg) for p in pushes])  # (M, N, 2)
+            tracks = np.stack([pad_positions(p, times, push_cfg) for p in pushes])  # (M, N+1, 2)
             cache.clear()
             cache[key] = (
                 pushes,  # keeps the list alive, so its id is not reused
@@ -90,15 +95,16 @@ def context_builder_for(
             )
         _, tracks, direction, speed = cache[key]
         m = len(pushes)
-        return PushContext(
+        ctx = PushContext(
             mask0=mask.expand(m, -1, -1, -1),
             pose0=torch.zeros(m, 3),
-            contact_xy=tracks[:, step].contiguous(),
+            contact_xy=tracks[:, 0],
             direction=direction,
             speed=speed,
             camera=camera,
             footprint=poly.expand(m, -1, -1),
         )
+        return with_pad_track(ctx, tracks, step + 1, 1.0 / rate_hz)
 
     return build
 

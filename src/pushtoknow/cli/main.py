@@ -59,7 +59,8 @@ def simulate(
     objects_from: str = typer.Option(
         "catalogue",
         "--objects-from",
-        help="catalogue | catalogue-train | catalogue-test | continuous | FILE (JSON/YAML specs)",
+        help="catalogue | catalogue-train | catalogue-test | continuous | "
+        "catalogue-train+continuous (alternately) | FILE (JSON/YAML specs)",
     ),
     profiles: str = typer.Option(
         "constant", "--profiles", help="comma-separated speed profiles: constant,release"

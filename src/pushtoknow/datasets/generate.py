@@ -46,7 +46,8 @@ class GenerationConfig(Config):
     seed: int = 0
     objects_from: str = Field(
         "catalogue",
-        description="catalogue | catalogue-train | catalogue-test | continuous | FILE",
+        description="catalogue | catalogue-train | catalogue-test | continuous | "
+        "catalogue-train+continuous | FILE",
     )
     profiles: tuple[Literal["constant", "release"], ...] = ("constant",)
     objects_per_shard: int = Field(4, gt=0)
@@ -73,6 +74,10 @@ def select_objects(objects_from: str, n: int, seed: int) -> list[ObjectSpec]:
         return [cat[ids[i]] for i in order[:n]]
     if objects_from == "continuous":
         return [sample_continuous_object(np.random.default_rng([seed, 1, i])) for i in range(n)]
+    if objects_from == "catalogue-train+continuous":  # alternately one of each
+        grid = select_objects("catalogue-train", (n + 1) // 2, seed)
+        cont = select_objects("continuous", n // 2, seed)
+        return [grid[i // 2] if i % 2 == 0 else cont[i // 2] for i in range(n)]
     path = Path(objects_from)
     if not path.exists():
         raise ObjectSpecError(

@@ -38,12 +38,13 @@ def _cell(mean: float, std: float | None = None) -> str:
 
 def method_table(methods: dict, order: list[str] | None = None) -> str:
     """Markdown table: NRMSE per parameter and overall (mean ± std over folds), μ·m, coverage,
-    impossible estimates (of all N·(K+1)), seconds per object."""
+    impossible estimates (of all N·(K+1)), share of release pushes chosen, seconds per
+    object."""
     lines = [
         "| method | "
         + " | ".join(HEADERS)
-        + " | μ·m | cov 68% | cov 90% | impossible | s/object |",
-        "|---" * (len(HEADERS) + 6) + "|",
+        + " | μ·m | cov 68% | cov 90% | impossible | release pushes | s/object |",
+        "|---" * (len(HEADERS) + 7) + "|",
     ]
     for name in order or list(methods):
         m = methods[name]
@@ -51,11 +52,13 @@ def method_table(methods: dict, order: list[str] | None = None) -> str:
         sec = m.get("seconds_per_object")
         bad = m.get("impossible_estimates")
         bad = "" if bad is None else f"{bad}/{m['estimates']}"
+        share = m.get("profile_share")
+        release = "" if not share else f"{share.get('release', 0.0):.0%}"
         lines.append(
             f"| {name} | "
             + " | ".join(cells)
             + f" | {_cell(m['mu_m'], m['mu_m_std'])} | {m['coverage68']:.2f} | "
-            + f"{m['coverage90']:.2f} | {bad} | {'' if sec is None else f'{sec:.1f}'} |"
+            + f"{m['coverage90']:.2f} | {bad} | {release} | {'' if sec is None else f'{sec:.1f}'} |"
         )
     return "\n".join(lines)
 

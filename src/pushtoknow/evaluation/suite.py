@@ -6,7 +6,10 @@ Protocol (what each number means):
   in any training set); "novel": `novel_objects` (unseen shapes and catalogue shapes, continuous
   parameters). Every method sees the same objects.
 - **Methods.** For each trained model, inference with K pushes on every object: the first model
-  with every policy in `policies`, the others with the first policy (`<variant>:<policy>`).
+  with every policy in `policies`, the others with the first policy (`<variant>:<policy>`; a
+  model whose structure differs from the first's is `<variant>-<structure>`). Each model's
+  policies choose among the speed profiles it was trained on; the share of each profile the
+  policy chose is reported (`profile_share`).
   `prior-mean`: the training objects' mean parameters. `forest`: the random-forest baseline
   (Mavrakis-style features, ground-truth poses) trained on the `--data` pushes and applied to
   the pushes the first model made under the first policy (same objects, same pushes), its
@@ -84,6 +87,7 @@ class MethodRun:
     product: np.ndarray | None = None
     seconds_per_object: float | None = None
     zscore: np.ndarray | None = None
+    profiles: list[list[str]] | None = None  # (N, K) speed profile of each push it chose
 
     def zscores(self, k: int) -> np.ndarray:
         """(N, 5) z-scores of the truth after push k."""
@@ -137,7 +141,14 @@ def summarise_method(
         "impossible_estimates": None
         if footprints is None
         else impossible_estimates(run.mean, footprints),
+        "profile_share": None if run.profiles is None else profile_share(run.profiles),
     }
+
+
+def profile_share(profiles: list[list[str]]) -> dict[str, float]:
+    """Share of the pushes (over objects and pushes) executed with each speed profile."""
+    flat = [p for row in profiles for p in row]
+    return {p: flat.count(p) / len(flat) for p in sorted(set(flat))} if flat else {}
 
 
 def heldout_object_refs(n: int | None) -> list[str]:
@@ -165,13 +176,15 @@ def novel_object_refs(n: int, seed: int) -> list[str]:
     return [o.to_json() for o in novel_objects(n, seed)]
 
 
-def _cache_key(model: Path, policy: str, objects: list[str], cfg: EvaluationConfig) -> str:
+def _cache_key(
+    model: Path, policy: str, objects: list[str], cfg: EvaluationConfig, profiles: tuple[str, ...]
+) -> str:
     h = hashlib.sha256()
     ckpt = Path(model) / "model.pt" if Path(model).is_dir() else Path(model)
     # the checkpoint's bytes, not its path: a retrained model at the same path must not reuse
     # the previous model's runs
     h.update(ckpt.read_bytes() if ckpt.is_file() else str(model).encode())
-    settings = [policy, cfg.pushes, cfg.seed, cfg.sigma_points, objects]
+    settings = [policy, cfg.pushes, cfg.seed, cfg.sigma_points, objects, list(profiles)]
     h.update(json.dumps(settings).encode())
     return h.hexdigest()[:16]
 
@@ -191,6 +204,7 @@ def _save_run(path: Path, key: str, run: HeldoutRun) -> None:
         seconds=np.array(run.seconds),
         features_truth=run.features_truth,
         features_vision=run.features_vision,
+        profiles=np.array(run.profiles),
     )
     os.replace(tmp, path)  # atomic: a half-written cache is never read
 
@@ -211,13 +225,20 @@ def _load_run(path: Path, key: str) -> HeldoutRun | None:
             seconds=f["seconds"].tolist(),
             features_truth=f["features_truth"],
             features_vision=f["features_vision"],
+            profiles=f["profiles"].tolist(),
         )
 
 
 def _inference_run(
-    model: Path, policy: str, objects: list[str], cfg: EvaluationConfig, cache: Path, progress
+    model: Path,
+    policy: str,
+    objects: list[str],
+    cfg: EvaluationConfig,
+    profiles: tuple[str, ...],
+    cache: Path,
+    progress,
 ) -> HeldoutRun:
-    key = _cache_key(model, policy, objects, cfg)
+    key = _cache_key(model, policy, objects, cfg, profiles)
     cached = _load_run(cache, key)
     if cached is not None:
         return cached
@@ -230,9 +251,16 @@ def _inference_run(
         cfg.workers,
         sigma_points=cfg.sigma_points,
         progress=progress,
+        profiles=profiles,
     )
     _save_run(cache, key, run)
     return run
+
+
+def trained_profiles(info: dict) -> tuple[str, ...]:
+    """The speed profiles a model was trained on (its policies may choose among them);
+    models from before profiles were recorded saw constant pushes only."""
+    return tuple(info.get("profiles") or ("constant",))
 
 
 def _forest_run(forest: ForestBaseline, features: np.ndarray, base: HeldoutRun, prior) -> MethodRun:
@@ -246,10 +274,14 @@ def _forest_run(forest: ForestBaseline, features: np.ndarray, base: HeldoutRun, 
     return MethodRun(np.stack(means), np.stack(stds), base.truth, base.ids)
 
 
-def _variant_names(variants: list[str]) -> list[str]:
-    """Method-name prefixes: the variant, suffixed by its position when repeated."""
+def _variant_names(loaded: list) -> list[str]:
+    """Method-name prefixes of the models: the variant, suffixed by the model structure when it
+    differs from the first model's ("vt-addf-black-box"), and by its position when repeated."""
+    first = loaded[0].models_config.structure
     names: list[str] = []
-    for v in variants:
+    for m in loaded:
+        structure = m.models_config.structure
+        v = m.variant if structure == first else f"{m.variant}-{structure}"
         names.append(v if v not in names else f"{v}#{len(names)}")
     return names
 
@@ -288,7 +320,7 @@ def run_evaluation(
     out.mkdir(parents=True, exist_ok=True)
     say = echo or (lambda _: None)
     loaded = [load_checkpoint(m) for m in models]  # CheckpointError before any work
-    names = _variant_names([m.variant for m in loaded])
+    names = _variant_names(loaded)
 
     say(f"forest: features of the training pushes in {data}")
     X, Y, obj, _ = features_from_dataset(data)
@@ -305,13 +337,14 @@ def run_evaluation(
         folds = fold_indices(len(objects), cfg.folds, cfg.seed)
         footprints = [load_object_spec(o).footprint for o in objects]
         methods: dict[str, MethodRun] = {}
-        for i, (model, name) in enumerate(zip(models, names)):
+        for i, (model, name, ckpt) in enumerate(zip(models, names, loaded)):
+            profiles = trained_profiles(ckpt.info)
             for policy in cfg.policies if i == 0 else cfg.policies[:1]:
                 method = f"{name}:{policy}"
-                say(f"{set_name}: {method} on {len(objects)} objects")
+                say(f"{set_name}: {method} on {len(objects)} objects ({', '.join(profiles)})")
                 adv = progress(f"{set_name} {method}", len(objects)) if progress else None
                 cache = out / "cache" / set_name / f"{method.replace(':', '_')}.npz"
-                run = _inference_run(model, policy, objects, cfg, cache, adv)
+                run = _inference_run(model, policy, objects, cfg, profiles, cache, adv)
                 methods[method] = MethodRun(
                     run.mean,
                     run.std,
@@ -320,6 +353,7 @@ def run_evaluation(
                     run.product,
                     float(np.median(run.seconds)),
                     run.zscore,
+                    run.profiles,
                 )
                 if i == 0 and policy == cfg.policies[0]:
                     base = run
@@ -337,9 +371,7 @@ def run_evaluation(
         results["sets"][set_name] = {
             "objects": base.ids,
             "folds": cfg.folds,
-            "methods": {
-                k: summarise_method(r, folds, footprints) for k, r in methods.items()
-            },
+            "methods": {k: summarise_method(r, folds, footprints) for k, r in methods.items()},
         }
         runs_for_figures[set_name] = methods
     results["methods"] = results["sets"]["heldout"]["methods"]

@@ -41,7 +41,7 @@ from pushtoknow.common.params import (
 from pushtoknow.geometry.affordances import mask_contour, sample_push_affordances
 from pushtoknow.models.calibration import keep_evidence
 from pushtoknow.models.checkpoint import TrainedModel
-from pushtoknow.models.learned import PushContext
+from pushtoknow.models.learned import PushContext, with_pad_track
 from pushtoknow.testbed.config import SimConfig
 from pushtoknow.testbed.executor import PushExecutor, View
 from pushtoknow.testbed.push import ProfileName, Push, pad_positions
@@ -324,10 +324,11 @@ class ObjectEstimator:
         pusher = torch.as_tensor(rec.pusher, dtype=torch.float32)
         tactile = torch.as_tensor(rec.tactile, dtype=torch.float32)
         every = self.model.inference.update_every
+        dt = 1.0 / self.model.sim_config.tactile.rate_hz
         steps = len(rec.time) - 1
         poses = [mean[0, :3].numpy().copy()]
         for t in range(1, steps + 1):
-            ctx = dataclasses.replace(base, contact_xy=pusher[t][None])
+            ctx = with_pad_track(base, pusher[None], t, dt)
             noise = filt.draw_noise(1, self.gen, num_sigma_points=self.num_sigma_points)
             mean, cov = filt.predict(mean, cov, ctx, noise)
             if t % every == 0 or t == steps:
@@ -374,7 +375,7 @@ def active_scorer(policy: Policy, sim_config: SimConfig, horizon_fraction: float
             base = est.context(view.s0, pose0, paths[:, 0], cands)
 
             def builder(_: list[Push], step: int) -> PushContext:
-                return dataclasses.replace(base, contact_xy=paths[:, step + 1])
+                return with_pad_track(base, paths, step + 1, dt)
 
             return policy_.choose(cands, mean, cov, builder, est.gen)
 

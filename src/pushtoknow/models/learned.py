@@ -21,6 +21,7 @@ Encoder modes (`EncodingConfig.mode`):
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -71,7 +72,10 @@ class PushContext:
     contact point, or the pusher's current position if the caller moves it along the push);
     direction (B,): push direction (rad, world); speed (B,): push speed (m/s); camera: the
     camera model of the images; footprint (B, V, 2) or None: footprint polygon (m, object
-    frame), used by `ComInFootprintConstraint`.
+    frame), used by `ComInFootprintConstraint`; pad_window (B, 4, 2) or None: the pad's
+    positions at samples t-2, t-1, t, t+1 around the step that ends at t (m, world; the
+    robot's kinematics, see `with_pad_track`), step_dt the time between samples (s): the
+    physics-structured models read the pad's velocity and acceleration from them.
     """
 
     mask0: torch.Tensor
@@ -81,6 +85,8 @@ class PushContext:
     speed: torch.Tensor
     camera: CameraModel
     footprint: torch.Tensor | None = None
+    pad_window: torch.Tensor | None = None
+    step_dt: float = 0.1
     _cache: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     def action_map(self, config: ActionMapConfig, dtype: torch.dtype) -> torch.Tensor:
@@ -115,6 +121,19 @@ class PushContext:
         expect_shape(self.speed, "context.speed", [("B", batch)])
         if self.footprint is not None:
             expect_shape(self.footprint, "context.footprint", [("B", batch), ("V", None), ("2", 2)])
+        if self.pad_window is not None:
+            expect_shape(self.pad_window, "context.pad_window", [("B", batch), ("4", 4), ("2", 2)])
+
+    def pad_kinematics(self) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """The pad's velocity over the step (B, 2) (m/s, backward difference t-1 → t) and its
+        accelerations at t and at t-1 (B, 2) (m/s², centred differences), world frame."""
+        if self.pad_window is None:
+            raise ShapeError("this model needs the pad's track: build contexts with with_pad_track")
+        w, dt = self.pad_window, self.step_dt
+        velocity = (w[:, 2] - w[:, 1]) / dt
+        accel = (w[:, 3] - 2 * w[:, 2] + w[:, 1]) / dt**2
+        accel_prev = (w[:, 2] - 2 * w[:, 1] + w[:, 0]) / dt**2
+        return velocity, accel, accel_prev
 
     def to(self, dtype: torch.dtype | None = None, device: torch.device | str | None = None):
         """A copy with every tensor moved to dtype/device."""
@@ -130,7 +149,40 @@ class PushContext:
             mv(self.speed),
             self.camera,
             mv(self.footprint),
+            mv(self.pad_window),
+            self.step_dt,
         )
+
+
+def pad_windows(paths: torch.Tensor, t: torch.Tensor | int) -> torch.Tensor:
+    """Pad positions at samples t-2, t-1, t, t+1 (B, 4, 2) from pad paths (B, T, 2) (m) and
+    sample indices t (B,) or one int. Beyond either end the path is extended at constant
+    velocity (a recorded push ends while the pad still moves at its push speed)."""
+    b, n, _ = paths.shape
+    before = 2 * paths[:, :1] - paths[:, 1:2]
+    first = torch.cat([2 * before - paths[:, :1], before], dim=1)
+    last = 2 * paths[:, -1:] - paths[:, -2:-1]
+    ext = torch.cat([first, paths, last], dim=1)  # sample s at index s + 2
+    t = torch.as_tensor(t, device=paths.device).long().expand(b)
+    if int(t.min()) < 0 or int(t.max()) >= n:
+        raise IndexError(f"sample index outside the path of {n} samples")
+    idx = t[:, None] + torch.arange(4, device=paths.device)  # s - 2 .. s + 1, shifted by 2
+    return ext.gather(1, idx[..., None].expand(b, 4, 2))
+
+
+def with_pad_track(
+    context: PushContext, paths: torch.Tensor, t: torch.Tensor | int, step_dt: float
+) -> PushContext:
+    """`context` for the step that ends at sample t of pad paths (B, T, 2) (m, world): the pad
+    at its position at t, and its window for the pad's velocity and acceleration."""
+    b = paths.shape[0]
+    t_b = torch.as_tensor(t, device=paths.device).long().expand(b)
+    return dataclasses.replace(
+        context,
+        contact_xy=paths[torch.arange(b, device=paths.device), t_b],
+        pad_window=pad_windows(paths, t_b),
+        step_dt=float(step_dt),
+    )
 
 
 class EncodingConfig(Config):
@@ -223,6 +275,8 @@ def _repeat_context(context: PushContext, times: int) -> PushContext:
         rep(context.speed),
         context.camera,
         rep(context.footprint),
+        rep(context.pad_window),
+        context.step_dt,
     )
 
 
@@ -361,8 +415,14 @@ class ScaledObservationNoise(ObservationNoiseModel):
 # --------------------------------------------------------------------------------------------
 class LearnedModelsConfig(Config):
     """Sizes of the learned models; the defaults are the paper-sized networks for 64 px images
-    and 5 parameters."""
+    and 5 parameters.
 
+    structure: "black-box" (the paper: m, μ, I_z enter ProcessNet and TacNet as inputs like
+    any feature) or "physics" (`models.physics`: how they enter force and motion is written
+    down; the networks' hidden sizes and output scales are those of `process` and `tac`).
+    """
+
+    structure: Literal["black-box", "physics"] = "black-box"
     param_dim: int = 5
     encoding: EncodingConfig = EncodingConfig()
     encoder: EncoderConfig = EncoderConfig(image_size=32)
@@ -389,7 +449,7 @@ class LearnedModelsConfig(Config):
 class LearnedModels:
     """The learned models sharing one ShapeActionEncoderNet."""
 
-    dynamics: LearnedDynamics
+    dynamics: DynamicsModel
     observation: ObservationModel
     observation_noise: LearnedObservationNoise
 
@@ -403,6 +463,8 @@ def build_learned_models(
     """Networks + geometry wired into the filter interfaces. vision_only: z = (x, y, θ) with a
     3-D ObsNoiseNet (the first three entries of config.obs_noise's per-dimension scales)."""
     encoding = ShapeActionEncoding(ShapeActionEncoderNet(config.encoder), config.encoding)
+    if config.structure == "physics":
+        return _physics_models(config, encoding, vision_only)
     dynamics = LearnedDynamics(encoding, ProcessNet(config.process))
     if vision_only:
         c = config.obs_noise
@@ -423,6 +485,26 @@ def build_learned_models(
             f"{observation.obs_dim} components"
         )
     return LearnedModels(dynamics, observation, LearnedObservationNoise(ObsNoiseNet(noise_cfg)))
+
+
+def _physics_models(
+    config: LearnedModelsConfig, encoding: ShapeActionEncoding, vision_only: bool
+) -> LearnedModels:
+    from pushtoknow.models import physics  # builds on this module's context and encoding
+    from pushtoknow.models.networks import PhysicsProcessNet, PhysicsTacNet
+
+    if vision_only or config.include_contact or config.param_dim != 5:
+        raise ValueError(
+            "physics-structured models need tactile observations without the contact "
+            "component and the five parameters"
+        )
+    process = PhysicsProcessNet(config.process, physics.GEOM_DIM, physics.DYN_DIM)
+    tac = PhysicsTacNet(config.tac, physics.GEOM_DIM, physics.INERTIAL_DIM)
+    return LearnedModels(
+        physics.PhysicsDynamics(encoding, process),
+        physics.PhysicsObservation(encoding, tac),
+        LearnedObservationNoise(ObsNoiseNet(config.obs_noise)),
+    )
 
 
 def build_filter(

@@ -340,3 +340,62 @@ class VisNet(nn.Module):
             [pose[..., 0] - pose0[..., 0], pose[..., 1] - pose0[..., 1], dth.sin(), dth.cos()],
             dim=-1,
         )
+
+
+# --------------------------------------------------------------------------------------------
+class PhysicsProcessNet(nn.Module):
+    """The physics-structured ProcessNet: raw outputs out = qs(x_geom, enc) + gate · dyn(x_dyn,
+    enc), then Δψ and Q exactly as `ProcessNet` (same config). x_geom carries no mass,
+    friction or inertia, so quasi-static motion cannot depend on them; x_dyn adds the
+    dimensionless groups in which μ and I_z/m enter motion, and the gate (∈ [0, 1], from the
+    pad's acceleration) switches them on only in dynamic phases. Mass alone never enters.
+
+    geom (..., G), dyn (..., G + K), gate (...), enc (..., E) → (Δψ (..., P), q_diag (..., P)).
+    """
+
+    def __init__(self, config: ProcessNetConfig, geom_dim: int, dyn_dim: int):
+        super().__init__()
+        self.config = config
+        c = config
+        self.quasi_static = _FeatureEncodingMLP(geom_dim, c.enc_dim, c.hidden_dims, 2 * c.pose_dim)
+        self.dynamic = _FeatureEncodingMLP(dyn_dim, c.enc_dim, c.hidden_dims, 2 * c.pose_dim)
+        self.register_buffer("delta_scale", torch.tensor(c.delta_scale), persistent=False)
+        self.register_buffer("q_scale", torch.tensor(c.q_scale), persistent=False)
+        self.register_buffer("q_floor_std", torch.tensor(c.q_floor_std), persistent=False)
+
+    def forward(
+        self, geom: torch.Tensor, dyn: torch.Tensor, gate: torch.Tensor, enc: torch.Tensor
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        out = self.quasi_static(geom, enc) + gate.unsqueeze(-1) * self.dynamic(dyn, enc)
+        p = self.config.pose_dim
+        dt = out.dtype
+        delta = self.delta_scale.to(dt) * out[..., :p]
+        std = self.q_floor_std.to(dt) + self.q_scale.to(dt) * F.softplus(out[..., p:])
+        return delta, std.square()
+
+
+class PhysicsTacNet(nn.Module):
+    """The physics-structured TacNet: the pad force in the push frame (along, across) is
+    F = m (μ g G + J a) — Coulomb friction of the table scaled by a learned dimensionless
+    G(x_geom) (geometry, contact, CoM; |G| = 1 for a rigid translation) plus the inertial
+    force of the pad's acceleration a through a learned dimensionless 2 × 2 J(x_inertial)
+    (the identity for a rigid translation; x_inertial adds I_z/m). Networks never see m or μ.
+
+    geom (..., G), inertial (..., G + 1), enc (..., E) → (G (..., 2), J (..., 2, 2),
+    contact logit (...)).
+    """
+
+    def __init__(self, config: TacNetConfig, geom_dim: int, inertial_dim: int):
+        super().__init__()
+        self.config = config
+        c = config
+        self.friction = _FeatureEncodingMLP(geom_dim, c.enc_dim, c.hidden_dims, 3)
+        self.inertial = _FeatureEncodingMLP(inertial_dim, c.enc_dim, c.hidden_dims, 4)
+
+    def forward(
+        self, geom: torch.Tensor, inertial: torch.Tensor, enc: torch.Tensor
+    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        f = self.friction(geom, enc)
+        j = self.inertial(inertial, enc).unflatten(-1, (2, 2))
+        eye = torch.eye(2, dtype=j.dtype, device=j.device)
+        return f[..., :2], eye + j, f[..., 2]

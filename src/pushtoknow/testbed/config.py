@@ -80,8 +80,9 @@ class PhysicsConfig(Config):
     )
     cone: Literal["pyramidal", "elliptic"] = "elliptic"
     solver: Literal["CG", "Newton"] = Field(
-        "CG", description="constraint solver: CG is 4× faster than Newton on the ~40 support "
-        "DOFs and agrees with it to 1e-6 m over a push"
+        "CG",
+        description="constraint solver: CG is 4× faster than Newton on the ~40 support "
+        "DOFs and agrees with it to 1e-6 m over a push",
     )
     impratio: float = Field(
         100.0, gt=0, description="friction-to-normal impedance ratio: stiff Coulomb friction"

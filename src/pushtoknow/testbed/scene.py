@@ -26,9 +26,7 @@ LOAD_SPRING_REST = -1000.0  # m: a spring this far below loads a support with a 
 SUPPORT_MASS_SHARE = 0.01  # at most this share of the mass sits in the supports (see build_mjcf)
 
 
-def support_points(
-    footprint: Footprint, spacing: float, margin: float, com=None
-) -> np.ndarray:
+def support_points(footprint: Footprint, spacing: float, margin: float, com=None) -> np.ndarray:
     """Support points (N, 2), object frame: a grid at `spacing` inside the footprint shrunk by
     `margin`, plus points every `spacing` along that shrunk outline. Their convex hull is the
     footprint less `margin`, except that the ring may cut a sharp corner; if `com` (2,) lies

@@ -71,9 +71,7 @@ def run_sequences(
             model.vision_only, settings.update_every,
         ):  # fmt: skip
             pass
-        mean_par, cov_par = keep_evidence(
-            mean_par, cov_par, mean[:, 3:], cov[:, 3:, 3:], weights
-        )
+        mean_par, cov_par = keep_evidence(mean_par, cov_par, mean[:, 3:], cov[:, 3:, 3:], weights)
         out.append((mean_par, cov_par))
     return out
 
@@ -101,9 +99,7 @@ def calibrate_evidence(
     task = progress.add_task("sequence calibration", total=len(cfg.weights)) if progress else None
     nll = []
     for w in cfg.weights:
-        beliefs = run_sequences(
-            model, val, seqs, torch.full((5,), float(w)), settings, cfg, seed
-        )
+        beliefs = run_sequences(model, val, seqs, torch.full((5,), float(w)), settings, cfg, seed)
         per_push = torch.stack([direction_nll(m, c, truth).mean(0) for m, c in beliefs])
         nll.append(per_push.mean(0))  # (K,) mean over pushes and objects
         if log:

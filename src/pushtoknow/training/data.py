@@ -50,6 +50,7 @@ class PushTensors:
     pusher (N, T, 2) · action (N, 5) · params (N, 5) SI (float64) · params_norm (N, 5)
     footprint (N, V, 2) from S_0 · object_index (N,) int64
     push_index (N,) int64 (order within its object) · vision_pose (N, T, 3) or None
+    step_dt: time between samples (s)
     """
 
     mask0: torch.Tensor
@@ -66,6 +67,7 @@ class PushTensors:
     camera: CameraModel
     horizon_steps: int
     vision_pose: torch.Tensor | None = None
+    step_dt: float = 0.1
 
     def __len__(self) -> int:
         return self.pose.shape[0]
@@ -91,7 +93,7 @@ def dataset_camera(root: Path) -> tuple[CameraModel, SimConfig]:
 def load_push_tensors(root: Path, max_objects: int | None = None) -> PushTensors:
     """Read every push of a dataset (without images) into a `PushTensors`."""
     root = Path(root)
-    camera, _ = dataset_camera(root)
+    camera, sim_config = dataset_camera(root)
     cols: dict[str, list] = {
         k: []
         for k in (
@@ -149,6 +151,7 @@ def load_push_tensors(root: Path, max_objects: int | None = None) -> PushTensors
         push_index=torch.as_tensor(cols["push_index"]),
         camera=camera,
         horizon_steps=lengths.pop(),
+        step_dt=1.0 / sim_config.tactile.rate_hz,
     )
 
 

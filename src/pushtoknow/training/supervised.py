@@ -21,7 +21,7 @@ import torch.nn.functional as F
 from pydantic import Field
 
 from pushtoknow.common.config import Config
-from pushtoknow.models.learned import LearnedModels, PushContext
+from pushtoknow.models.learned import LearnedModels, PushContext, with_pad_track
 from pushtoknow.training.data import PushTensors
 
 
@@ -38,16 +38,19 @@ class SupervisedConfig(Config):
 
 
 def push_context(pt: PushTensors, push: torch.Tensor, t: torch.Tensor) -> PushContext:
-    """Context of the step that ends at sample t (pad at its position at t) for pushes `push`."""
-    return PushContext(
+    """Context of the step that ends at sample t (B,) (pad at its position at t, and its
+    track around t) for pushes `push` (B,)."""
+    paths = pt.pusher[push]
+    ctx = PushContext(
         mask0=pt.mask0[push],
         pose0=pt.pose[push, 0],
-        contact_xy=pt.pusher[push, t],
+        contact_xy=paths[:, 0],
         direction=pt.action[push, 2],
         speed=pt.action[push, 3],
         camera=pt.camera,
         footprint=pt.footprint[push],
     )
+    return with_pad_track(ctx, paths, t, pt.step_dt)
 
 
 def true_state(pt: PushTensors, push: torch.Tensor, t: torch.Tensor) -> torch.Tensor:

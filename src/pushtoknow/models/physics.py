@@ -1,0 +1,179 @@
+"""Physics-structured learned models: how m, μ and I_z enter force and motion is written down,
+the networks learn geometry, contact and the CoM's effect (the hybrid approach of Kloss,
+Schaal and Bohg, IJRR 2022; README "The models").
+
+* Force (`PhysicsObservation`): F = m (μ g G + J a) in the push frame, G and J dimensionless
+  networks of geometry, contact and CoM (J also of I_z/m), a the pad's acceleration. Scaling
+  m by k and μ by 1/k leaves a quasi-static force unchanged; mass is only separable from μ
+  through the pad's acceleration.
+* Motion (`PhysicsDynamics`): Δψ from a quasi-static network that never sees m, μ or I_z, plus
+  a dynamic network gated by the pad's acceleration (exactly off while |a| ≤ STEADY_ACCEL at
+  t and t-1, i.e. in steady pushes) that sees μ and I_z/m only as the
+  dimensionless groups of sliding (a/μg, v²/2μgL, log I_z/(m L²)); m alone never enters.
+
+Features per sigma point (B, S, ·), with L = `EncodingConfig.length_scale` and the pad's
+kinematics from `PushContext.pad_kinematics`:
+
+* geometry (GEOM_DIM): (x - x0, y - y0)/L, sin, cos (θ - θ0), the normalised CoM (2), the
+  deviation (δx/L, δy/L, δθ) from the encoding's pose, the pad in the point's object frame
+  (position/L, push direction sin, cos), the pad's velocity over the step / SPEED_SCALE and
+  its accelerations at t and t-1 / ACCEL_SCALE, all in the object frame;
+* dynamic (GEOM_DIM + 5): geometry, normalised log μ, log I_z/(m L²) normalised, |a_t|/μg,
+  |a_{t-1}|/μg, |v|²/(2 μ g L);
+* inertial (GEOM_DIM + 1): geometry and log I_z/(m L²) normalised.
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+
+from pushtoknow.common.params import GRAVITY, PARAM_NAMES, PARAM_RANGES, denormalise_params
+from pushtoknow.filters.interfaces import DynamicsModel, ObservationModel
+from pushtoknow.models.learned import POSE_DIM, SPEED_SCALE, PushContext, ShapeActionEncoding
+from pushtoknow.models.networks import PhysicsProcessNet, PhysicsTacNet
+
+ACCEL_SCALE = 1.0  # m/s², normalises the pad's acceleration features
+GATE_ACCEL = 0.5  # m/s²: scale of the gate of the dynamic motion term (below)
+STEADY_ACCEL = 0.05  # m/s²: pad accelerations below this are a steady push (tracking noise)
+GEOM_DIM = 19
+DYN_DIM = GEOM_DIM + 5
+INERTIAL_DIM = GEOM_DIM + 1
+_M, _MU, _CX, _CY, _I = (
+    PARAM_NAMES.index(k) for k in ("mass", "friction", "com_x", "com_y", "inertia")
+)
+
+
+def _ratio_normalisation(length_scale: float) -> tuple[float, float]:
+    """(centre, half-width) of log I_z/(m L²) over the catalogue ranges."""
+    (m_lo, m_hi), (i_lo, i_hi) = PARAM_RANGES["mass"], PARAM_RANGES["inertia"]
+    lo = math.log(i_lo / (m_hi * length_scale**2))
+    hi = math.log(i_hi / (m_lo * length_scale**2))
+    return 0.5 * (lo + hi), 0.5 * (hi - lo)
+
+
+def _in_frame(vec: torch.Tensor, angle: torch.Tensor) -> torch.Tensor:
+    """World vectors (B, 2) expressed in frames rotated by angle (B, S) → (B, S, 2)."""
+    c, s = angle.cos(), angle.sin()
+    vx, vy = vec[:, None, 0], vec[:, None, 1]
+    return torch.stack([c * vx + s * vy, -s * vx + c * vy], dim=-1)
+
+
+def physics_features(
+    states: torch.Tensor, context: PushContext, anchor: torch.Tensor, length_scale: float
+) -> dict[str, torch.Tensor]:
+    """Features of states (B, S, 3 + 5) (pose, normalised φ): "geom" (B, S, GEOM_DIM), "dyn"
+    (B, S, DYN_DIM), "inertial" (B, S, INERTIAL_DIM), "gate" (B, S) ∈ [0, 1), "mass" and
+    "friction" (B, S) in SI, "accel_push" (B, 2) the pad's acceleration at t in the push frame
+    (m/s²). anchor (B, S or 1, 3): the pose each encoding was computed at."""
+    dt = states.dtype
+    pose0 = context.pose0.to(dt).unsqueeze(1)
+    th = states[..., 2]
+    rel = (states[..., :2] - pose0[..., :2]) / length_scale
+    dth = th - pose0[..., 2]
+    dev = states[..., :3] - anchor
+    d = context.contact_xy.to(dt).unsqueeze(1) - states[..., :2]
+    c, s = th.cos(), th.sin()
+    pad = torch.stack([c * d[..., 0] + s * d[..., 1], -s * d[..., 0] + c * d[..., 1]], -1)
+    pd = context.direction.to(dt).unsqueeze(1) - th
+    velocity, accel, accel_prev = (k.to(dt) for k in context.pad_kinematics())
+    geom = torch.cat(
+        [
+            rel,
+            dth.sin().unsqueeze(-1),
+            dth.cos().unsqueeze(-1),
+            states[..., 3 + _CX : 3 + _CY + 1],
+            dev[..., :2] / length_scale,
+            dev[..., 2:],
+            pad / length_scale,
+            pd.sin().unsqueeze(-1),
+            pd.cos().unsqueeze(-1),
+            _in_frame(velocity, th) / SPEED_SCALE,
+            _in_frame(accel, th) / ACCEL_SCALE,
+            _in_frame(accel_prev, th) / ACCEL_SCALE,
+        ],
+        dim=-1,
+    )
+    si = denormalise_params(states[..., 3:])
+    mass, friction, inertia = si[..., _M], si[..., _MU], si[..., _I]
+    centre, half = _ratio_normalisation(length_scale)
+    ratio = ((torch.log(inertia / (mass * length_scale**2)) - centre) / half).unsqueeze(-1)
+    mu_g = friction * GRAVITY
+    a_now = accel.norm(dim=-1).unsqueeze(1)  # (B, 1)
+    a_prev = accel_prev.norm(dim=-1).unsqueeze(1)
+    speed_sq = velocity.square().sum(-1).unsqueeze(1)
+    dyn = torch.cat(
+        [
+            geom,
+            states[..., 3 + _MU : 3 + _MU + 1],
+            ratio,
+            (a_now / mu_g).unsqueeze(-1),
+            (a_prev / mu_g).unsqueeze(-1),
+            (speed_sq / (2 * mu_g * length_scale)).unsqueeze(-1),
+        ],
+        dim=-1,
+    )
+    excess = torch.relu(a_now - STEADY_ACCEL) + torch.relu(a_prev - STEADY_ACCEL)
+    gate = (1.0 - torch.exp(-excess / GATE_ACCEL)).expand_as(th)
+    push_dir = context.direction.to(dt)
+    accel_push = _in_frame(accel, push_dir[:, None])[:, 0]
+    return {
+        "geom": geom,
+        "dyn": dyn,
+        "inertial": torch.cat([geom, ratio], dim=-1),
+        "gate": gate,
+        "mass": mass,
+        "friction": friction,
+        "accel_push": accel_push,
+    }
+
+
+class PhysicsDynamics(DynamicsModel):
+    """(Δψ, Q) from `PhysicsProcessNet` on the physics features of each sigma point."""
+
+    def __init__(self, encoding: ShapeActionEncoding, process_net: PhysicsProcessNet):
+        super().__init__()
+        self.encoding = encoding
+        self.process_net = process_net
+
+    def forward(
+        self, states: torch.Tensor, context: PushContext
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        enc, anchor = self.encoding(states[..., :POSE_DIM], context)
+        f = physics_features(states, context, anchor, self.encoding.config.length_scale)
+        return self.process_net(f["geom"], f["dyn"], f["gate"], enc)
+
+
+class PhysicsObservation(ObservationModel):
+    """h(s) = (x, y, θ, F_x, F_y) with F = m (μ g G + J a) rotated from the push frame to the
+    world (`PhysicsTacNet`)."""
+
+    def __init__(self, encoding: ShapeActionEncoding, tac_net: PhysicsTacNet):
+        super().__init__()
+        self.encoding = encoding
+        self.tac_net = tac_net
+        self.include_contact = False
+        self.obs_dim = POSE_DIM + 2
+        self.angle_indices = (2,)
+
+    def tactile(
+        self, states: torch.Tensor, context: PushContext
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """Forces (B, S, 2) in N (world) and contact logits (B, S) for states (B, S, D)."""
+        enc, anchor = self.encoding(states[..., :POSE_DIM], context)
+        f = physics_features(states, context, anchor, self.encoding.config.length_scale)
+        g, j, logit = self.tac_net(f["geom"], f["inertial"], enc)
+        a = f["accel_push"].unsqueeze(1).unsqueeze(-1)  # (B, 1, 2, 1)
+        push_frame = f["mass"].unsqueeze(-1) * (
+            (f["friction"] * GRAVITY).unsqueeze(-1) * g + (j @ a).squeeze(-1)
+        )
+        pd = context.direction.to(states.dtype)[:, None]
+        c, s = pd.cos(), pd.sin()
+        along, across = push_frame[..., 0], push_frame[..., 1]
+        world = torch.stack([c * along - s * across, s * along + c * across], dim=-1)
+        return world, logit
+
+    def forward(self, states: torch.Tensor, context: PushContext) -> torch.Tensor:
+        forces, _ = self.tactile(states, context)
+        return torch.cat([states[..., :POSE_DIM], forces], dim=-1)
