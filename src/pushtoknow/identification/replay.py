@@ -24,6 +24,7 @@ import numpy as np
 from shapely.geometry import Point
 from shapely.ops import nearest_points
 
+from pushtoknow.common.errors import IdentificationError, PushToKnowError
 from pushtoknow.common.params import ObjectParams
 from pushtoknow.testbed.config import SimConfig
 from pushtoknow.testbed.objects import COM_MARGIN, ObjectSpec
@@ -32,6 +33,7 @@ from pushtoknow.testbed.shapes import Footprint, footprint_from_shape
 
 COM_INSET = 2e-4  # m: candidates keep the CoM this far inside the valid region (rounding)
 INERTIA_SHARE = 0.999  # candidates keep I_z below this share of the footprint's bound
+MAX_FRICTION = 1.99  # the testbed refuses Coulomb coefficients above 2
 
 
 @dataclass(frozen=True)
@@ -70,7 +72,8 @@ class ReplayScene:
 
 def feasible(phi: np.ndarray, footprint: Footprint) -> tuple[np.ndarray, float, float]:
     """The nearest simulable φ (5,) SI: CoM inside the footprint by the testbed's margin, I_z
-    below the most this footprint allows. Returns (φ, CoM moved (m), I_z excess ratio − 1)."""
+    below the most this footprint allows, μ below the testbed's limit. Returns (φ, CoM moved
+    (m), excess: Σ (value / bound − 1) over I_z and μ where above their bound)."""
     phi = np.array(phi, dtype=np.float64)
     region = footprint.polygon.buffer(-(COM_MARGIN + COM_INSET))
     c = Point(phi[2], phi[3])
@@ -80,8 +83,9 @@ def feasible(phi: np.ndarray, footprint: Footprint) -> tuple[np.ndarray, float, 
         moved = float(c.distance(q))
         phi[2], phi[3] = q.x, q.y
     bound = INERTIA_SHARE * phi[0] * footprint.max_radius_from(phi[2:4]) ** 2
-    excess = max(0.0, float(phi[4] / bound - 1.0))
+    excess = max(0.0, float(phi[4] / bound - 1.0)) + max(0.0, float(phi[1] / MAX_FRICTION - 1.0))
     phi[4] = min(phi[4], bound)
+    phi[1] = min(phi[1], MAX_FRICTION)
     return phi, moved, excess
 
 
@@ -116,7 +120,10 @@ def simulate_track(scene: ReplayScene, phi: np.ndarray, track: PushTrack) -> np.
 
 def _task(args) -> np.ndarray:
     scene, phi, track = args
-    return simulate_track(scene, phi, track)
+    try:
+        return simulate_track(scene, phi, track)
+    except (PushToKnowError, ValueError) as e:  # re-raised as one picklable, one-line error
+        raise IdentificationError(f"replaying a push with φ = {phi.tolist()} failed: {e}") from None
 
 
 class RolloutPool:
