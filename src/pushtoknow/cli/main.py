@@ -338,6 +338,12 @@ def evaluate_cmd(
         [], "--append", help="markdown file appended to RESULTS.md (e.g. estimate-real's)"
     ),
     as_json: bool = typer.Option(False, "--json", help="print results.json to stdout"),
+    oracle: bool = typer.Option(
+        None,
+        "--oracle/--no-oracle",
+        help="add the 'oracle' row: physics-based identification on the same pushes with the "
+        "true footprint and the simulator's own physics, an upper bound (~40 s per object)",
+    ),
 ):
     """Prior mean, random forest (ground-truth and VisNet poses), each model and push policy on
     held-out and novel objects: NRMSE (mean ± std over folds), coverage, figures, RESULTS.md."""
@@ -350,7 +356,7 @@ def evaluate_cmd(
     from pushtoknow.pretrained import resolve_model_path
 
     cfg = EvaluationConfig.from_yaml(config) if config else EvaluationConfig()
-    overrides = {"folds": folds, "seed": seed, "workers": workers}
+    overrides = {"folds": folds, "seed": seed, "workers": workers, "oracle": oracle}
     cfg = cfg.model_copy(update={k: v for k, v in overrides.items() if v is not None})
     cfg = EvaluationConfig.model_validate(cfg.model_dump())
     refs = [r for m in models for r in m.split(",") if r]

@@ -112,3 +112,49 @@ def run_identification_benchmark(
         "parameters": list(PARAM_NAMES),
         "per_object": rows,
     }
+
+
+ORACLE = "oracle"
+
+
+def oracle_run(base, objects: list[str], sim_config: SimConfig, seed: int, workers: int, progress):
+    """The `oracle` method of the evaluation suite: `identify` on the pushes the first model
+    made (`base`: its HeldoutRun, with push tracks), the true footprint and the simulator's own
+    physics. Returns a `suite.MethodRun` of two rows per object: the prior and the estimate
+    after all K pushes (fitting after every push would cost K times as much)."""
+    from pushtoknow.common.params import normalise_params, product_moments, si_moments
+    from pushtoknow.evaluation.heldout import records_from_tracks
+    from pushtoknow.evaluation.suite import MethodRun
+    from pushtoknow.identification.prior import prior_moments
+    from pushtoknow.testbed.objects import load_object_spec
+
+    cfg = IdentifyConfig(workers=workers)
+    sim = sim_config.model_copy(update={"render": False})
+    z0, p0 = prior_moments()
+    m0, s0 = si_moments(z0, p0)
+    prod0 = product_moments(z0, p0)[0]
+    means, stds, zs, prods, secs = [], [], [], [], []
+    with RolloutPool(workers) as pool:
+        for i, ref in enumerate(objects):
+            spec = load_object_spec(ref)
+            records = records_from_tracks(base.push_actions[i], base.push_tracks[i])
+            scene = ReplayScene(resolve_shape(spec.shape), spec.height, sim)
+            res = identify(records, scene, cfg, seed=seed, pool=pool)
+            truth = base.truth[i]
+            z_prior = (normalise_params(truth) - z0) / np.sqrt(np.diagonal(p0))
+            means.append([m0, res.mean])
+            stds.append([s0, res.std])
+            zs.append([z_prior, res.zscore(truth)])
+            prods.append([prod0, res.mu_m])
+            secs.append(res.seconds)
+            if progress is not None:
+                progress()
+    return MethodRun(
+        np.array(means),
+        np.array(stds),
+        base.truth,
+        base.ids,
+        np.array(prods),
+        float(np.median(secs)),
+        np.array(zs),
+    )
