@@ -34,19 +34,23 @@ class IdentifyConfig(Config):
         2, ge=1, description="at most this many of the best starts are refined (see `restart_chi2`)"
     )
     restart_chi2: float = Field(
-        3.0, gt=0, description="refine the next start only if the reduced χ² is above this"
+        1.2,
+        gt=0,
+        description="refine the next start only if the reduced χ² stays above this (≈ 1 at the "
+        "optimum when the noise model is right)",
     )
-    max_iterations: int = Field(15, ge=1, description="Levenberg–Marquardt iterations per start")
+    max_iterations: int = Field(20, ge=1, description="Levenberg–Marquardt iterations per start")
     step_tolerance: float = Field(
-        2e-3, gt=0, description="stop when no fit coordinate moves more than this (normalised)"
+        1e-3, gt=0, description="stop when no fit coordinate moves more than this (normalised)"
     )
     max_step: float = Field(
         0.5, gt=0, description="largest change of a fit coordinate per iteration (normalised)"
     )
     cost_tolerance: float = Field(
-        1e-3,
+        0.05,
         gt=0,
-        description="stop when an iteration lowers the objective by less than this share",
+        description="stop when an iteration lowers the objective by less than this (the "
+        "objective is χ²/2: one standard deviation along any direction is worth 0.5)",
     )
     fd_steps: tuple[float, float, float, float, float] = Field(
         (0.01, 0.1, 0.02, 0.02, 0.15),
@@ -59,6 +63,14 @@ class IdentifyConfig(Config):
         ge=0,
         description="a direction whose data information is below this share of the prior's is "
         "reported as not identified and keeps the prior's width",
+    )
+    information_scale: float = Field(
+        1.0,
+        gt=0,
+        le=1,
+        description="share of the data information the posterior keeps (1: the Laplace "
+        "approximation as it is; below 1 widens identified directions by 1/sqrt(share) for "
+        "what the noise model leaves out)",
     )
     stop_at_rest: float = Field(
         1e-4, gt=0, description="m/s: a replayed release push stops once pad and object rest"

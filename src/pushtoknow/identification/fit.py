@@ -22,7 +22,9 @@ Uncertainty: Laplace at the optimum, combined with the prior: the data informati
 (scaled by the reduced χ² when that exceeds 1) is diagonalised in prior-whitened
 coordinates; a direction carrying less than `flat_information` of the prior's information is
 reported as not identified and its data information dropped, so it keeps exactly the prior's
-width, never a narrow width from a flat or noisy curvature. Posterior cov = (H_data + P⁻¹)⁻¹.
+width, never a narrow width from a flat or noisy curvature. Posterior cov = (H_data + P⁻¹)⁻¹
+plus δδᵀ, δ the last Gauss–Newton step (a polish with a central-difference Jacobian): how far
+the optimum may still be from where the search stopped.
 """
 
 from __future__ import annotations
@@ -98,6 +100,8 @@ class Identification:
     profiles: tuple[str, ...]
     level: float = LEVEL
     notes: tuple[str, ...] = field(default=())
+    data_information: np.ndarray | None = None  # (5, 5) fit coordinates, unscaled
+    last_step: np.ndarray | None = None  # (5,) fit coordinates
 
     def zscore(self, truth) -> np.ndarray:
         """(5,) z-scores of a true φ (SI) in the normalised space where the belief is Gaussian."""
@@ -136,6 +140,10 @@ class Identification:
             "pushes": self.pushes,
             "profiles": list(self.profiles),
             "notes": list(self.notes),
+            "data_information_fit": None
+            if self.data_information is None
+            else self.data_information.tolist(),
+            "last_step_fit": None if self.last_step is None else self.last_step.tolist(),
         }
 
 
@@ -216,6 +224,32 @@ def _describe(direction_z: np.ndarray) -> str:
     d = d if d[np.argmax(np.abs(d))] > 0 else -d
     parts = [f"{c:+.2f} {k}" for c, k in zip(d, PARAM_NAMES) if abs(c) >= 0.2]
     return " ".join(parts)
+
+
+def laplace_posterior(
+    h_data: np.ndarray,
+    last_step: np.ndarray,
+    prior_cov: np.ndarray,
+    flat_information: float,
+    information_scale: float = 1.0,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Posterior covariance (5, 5) in fit coordinates from the data information h_data (5, 5)
+    at the optimum, the prior covariance and the last Gauss–Newton step (5,).
+
+    The data information, times `information_scale`, is diagonalised in prior-whitened
+    coordinates (eigenvalue 1 = as informative as the prior); eigenvalues below
+    `flat_information` are dropped (those directions keep the prior's width), the rest combine
+    with the prior, and the last step's outer product is added. Returns (cov, eigenvalues (5,)
+    ascending, eigenvectors (5, 5) in whitened coordinates, flat (5,) bool)."""
+    chol = np.linalg.cholesky(prior_cov)
+    white = chol.T @ (information_scale * h_data) @ chol
+    lam, vecs = np.linalg.eigh(0.5 * (white + white.T))
+    lam = np.clip(lam, 0.0, None)
+    flat = lam < flat_information
+    kept = np.where(flat, 0.0, lam)
+    cov = chol @ vecs @ np.diag(1.0 / (1.0 + kept)) @ vecs.T @ chol.T
+    cov += np.outer(last_step, last_step)
+    return 0.5 * (cov + cov.T), lam, vecs, flat
 
 
 class _Problem:
@@ -354,7 +388,7 @@ def identify(
                 if (
                     not moved
                     or np.max(np.abs(step)) < cfg.step_tolerance
-                    or previous - cost < cfg.cost_tolerance * previous
+                    or previous - cost < cfg.cost_tolerance
                 ):
                     break
             chi2 = float(np.sum(r[:n] ** 2) / max(n - 5, 1))
@@ -370,13 +404,21 @@ def identify(
         report(10)
         jac = ((rj[:5] - rj[5:]) / (2 * fd[:, None])).T  # central differences
         w = np.concatenate([_huber_weights(r[:n], cfg.huber, prob.robust), np.ones(len(r) - n)])
+        # one Gauss–Newton polish with the central Jacobian; the optimum is known only to
+        # within this last step, so its outer product joins the covariance below
+        h_full = jac.T @ (w[:, None] * jac) + p_u_inv
+        newton = np.linalg.solve(h_full, -(jac.T @ (w * r) + p_u_inv @ (u - u_prior)))
+        newton *= min(1.0, cfg.max_step / max(np.max(np.abs(newton)), 1e-300))
+        trial = u + newton
+        rt = prob.residuals(trial[None])[0]
+        report(1)
+        if costs(rt[None], trial[None])[0] < cost:
+            u, r = trial, rt
+            chi2 = float(np.sum(r[:n] ** 2) / max(n - 5, 1))
         h_data = jac.T @ (w[:, None] * jac) * (1.0 / max(1.0, chi2))
-        white = chol.T @ h_data @ chol
-        lam_d, vecs = np.linalg.eigh(0.5 * (white + white.T))
-        lam_d = np.clip(lam_d, 0.0, None)
-        flat = lam_d < cfg.flat_information
-        kept = np.where(flat, 0.0, lam_d)
-        cov_u = chol @ vecs @ np.diag(1.0 / (1.0 + kept)) @ vecs.T @ chol.T
+        cov_u, lam_d, vecs, flat = laplace_posterior(
+            h_data, newton, p_u, cfg.flat_information, cfg.information_scale
+        )
         t_inv = np.linalg.inv(tmat)
         z_map = t_inv @ u
         cov_z = t_inv @ cov_u @ t_inv.T
@@ -431,4 +473,6 @@ def identify(
         pushes=len(tracks),
         profiles=tuple(sorted({t.push.profile for t in tracks})),
         notes=tuple(notes),
+        data_information=h_data,
+        last_step=newton,
     )

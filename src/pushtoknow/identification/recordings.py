@@ -159,7 +159,7 @@ def replay_scene(
     if shape == "dataset":
         if obj.shape is None:
             raise IdentificationError(
-                f"{obj.name}: the dataset stores no footprint; pass --shape SPEC or from-mask"
+                f"{obj.name}: the dataset stores no footprint; pass --shape SHAPE or from-mask"
             )
         fp_shape = obj.shape
     elif shape == "from-mask":
