@@ -82,3 +82,19 @@ def test_centred_constant_push_leaves_inertia_at_the_prior_width():
     # the prior's 90% interval of I_z in SI, for comparison
     assert res.upper[i] - res.lower[i] > 0.9e-3
     assert abs(res.mu_m / 0.25 - 1) < 0.02
+
+
+def test_laplace_posterior_keeps_flat_directions_at_the_prior():
+    from pushtoknow.identification.fit import laplace_posterior
+
+    prior = np.diag([0.3, 0.3, 0.33, 0.33, 0.31])
+    h = np.diag([1e6, 50.0, 1e4, 1e4, 0.01])  # the last direction carries ~0.3% of the prior
+    cov, lam, _, flat = laplace_posterior(h, np.zeros(5), prior, 0.1)
+    assert flat.sum() == 1 and cov[4, 4] == pytest.approx(prior[4, 4])
+    assert cov[0, 0] == pytest.approx(1 / (1e6 + 1 / 0.3))
+    wider, *_ = laplace_posterior(h, np.zeros(5), prior, 0.1, information_scale=0.25)
+    assert wider[0, 0] == pytest.approx(4 * cov[0, 0], rel=1e-3)
+    assert wider[4, 4] == pytest.approx(prior[4, 4])
+    step = np.array([0.0, 0.1, 0.0, 0.0, 0.0])
+    with_step, *_ = laplace_posterior(h, step, prior, 0.1)
+    assert with_step[1, 1] == pytest.approx(cov[1, 1] + 0.01)
