@@ -59,18 +59,21 @@ class IdentifyConfig(Config):
         "simulator's step-to-step jitter (a few χ² units) does not pose as information",
     )
     flat_information: float = Field(
-        0.1,
+        10.0,
         ge=0,
-        description="a direction whose data information is below this share of the prior's is "
-        "reported as not identified and keeps the prior's width",
+        description="a direction whose data information is below this many times the prior's "
+        "is reported as not identified: it keeps the prior's width and the prior's estimate "
+        "(below ~10 the curvature is within reach of the simulator's step-to-step jitter of a "
+        "few χ² units, so a Laplace width there would not be honest)",
     )
     information_scale: float = Field(
-        1.0,
+        0.3,
         gt=0,
         le=1,
         description="share of the data information the posterior keeps (1: the Laplace "
-        "approximation as it is; below 1 widens identified directions by 1/sqrt(share) for "
-        "what the noise model leaves out)",
+        "approximation as it is; 0.3 widens identified directions 1.8-fold for what the noise "
+        "model leaves out: the simulator's jitter and an optimum located only to within it; "
+        "chosen on 16 novel objects of seed 2, 5 mixed pushes, for 90% coverage)",
     )
     stop_at_rest: float = Field(
         1e-4, gt=0, description="m/s: a replayed release push stops once pad and object rest"

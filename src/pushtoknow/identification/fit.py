@@ -419,6 +419,12 @@ def identify(
         cov_u, lam_d, vecs, flat = laplace_posterior(
             h_data, newton, p_u, cfg.flat_information, cfg.information_scale
         )
+        # along a direction the pushes do not reveal, the estimate is the prior's (given the
+        # identified coordinates), as the information dropped there would have it
+        w_u = np.linalg.solve(chol, u - u_prior)
+        for j in np.where(flat)[0]:
+            w_u -= vecs[:, j] * float(vecs[:, j] @ w_u)
+        u = u_prior + chol @ w_u
         t_inv = np.linalg.inv(tmat)
         z_map = t_inv @ u
         cov_z = t_inv @ cov_u @ t_inv.T
