@@ -10,8 +10,9 @@ profile from the recorded pad start `pusher[0]`, so the fit sees exactly the exe
 pad joints' qpos and qvel at every physics step and refines the step during a release push's
 dynamic phase, which rollout's control vector cannot express without changing the physics
 (a mocap pad has no velocity in the contact Jacobian). `mujoco.sysid` (also shipped) builds on
-rollout with actuated models, and its optional dependencies are not installed here. So the
-batch runs the testbed's own `PushSimulator` in a process pool, one task per (φ, push).
+rollout with actuated models, and does not import here (its optional dependency absl is
+missing). So the batch runs the testbed's own `PushSimulator` in a process pool, one task per
+(φ, push).
 """
 
 from __future__ import annotations
