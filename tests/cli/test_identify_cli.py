@@ -57,3 +57,16 @@ def test_bad_inputs_give_one_line_errors(tmp_path):
         run("identify", "--pushes", str(ds), "--shape", "missing.json"),
         "no such file or shape name",
     )
+
+
+def test_identify_bench_reports_accuracy_coverage_and_compute(tmp_path):
+    out = tmp_path / "bench.json"
+    args = ["--objects", "1", "--pushes", "1", "--profiles", "constant", "--workers", "1"]
+    r = run("identify-bench", *args, "--seed", "3", "--out", str(out), "--json")
+    assert r.returncode == 0, r.stderr
+    res = json.loads(r.stdout)
+    assert json.loads(out.read_text())["nrmse"] == res["nrmse"]
+    assert set(res["coverage90"]) == {"mass", "friction", "com_x", "com_y", "inertia", "overall"}
+    assert res["mu_m_relative_error"]["max"] < 0.02  # one constant push measures μ·m
+    assert res["rollouts_per_object"]["median"] > 0 and res["seconds_per_object"]["median"] > 0
+    assert res["profiles"] == ["constant"]
