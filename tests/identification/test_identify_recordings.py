@@ -78,3 +78,17 @@ def test_a_pad_track_off_its_profile_is_refused(tiny):
     rec.pusher[5:] += 0.01
     with pytest.raises(IdentificationError, match="departs"):
         tracks_from_records([rec], obj.sim_config)
+
+
+def test_identify_with_the_footprint_from_the_mask(tiny):
+    """The mask's footprint is coarse (64 px), yet μ·m comes out within 5% and the CoM is
+    reported in the record's frame (within a centimetre of the truth)."""
+    from pushtoknow.identification.config import IdentifyConfig
+    from pushtoknow.identification.fit import identify
+
+    (obj,) = load_recorded_objects(tiny)
+    res = identify(obj.records, replay_scene(obj, "from-mask"), IdentifyConfig(workers=1))
+    assert abs(res.mu_m / (0.5 * 0.5) - 1) < 0.05
+    assert np.hypot(*(res.mean[2:4] - SPEC.params.as_array()[2:4])) < 0.01
+    z = res.zscore(SPEC.params.as_array())
+    assert np.isfinite(z).all()

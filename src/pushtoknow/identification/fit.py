@@ -434,17 +434,17 @@ def identify(
         if own_pool:
             pool.close()
 
-    # ---- SI summaries
+    # ---- SI summaries, the CoM in the record's object frame
+    estimate = feasible(denormalise_params(z_map), footprint)[0]
+    dx, dy = scene.frame_offset
+    estimate[2:4] += (dx, dy)
+    z_map = z_map.copy()
+    z_map[2:4] += np.array([dx, dy]) / space_scale()[2:4]  # the CoM is normalised linearly
     mean, std = si_moments(z_map, cov_z)
     sd = np.sqrt(np.diagonal(cov_z))
     q = norm.ppf(0.5 + LEVEL / 2)
     lower = denormalise_params(z_map - q * sd)
     upper = denormalise_params(z_map + q * sd)
-    estimate = feasible(denormalise_params(z_map), footprint)[0]
-    dx, dy = scene.frame_offset
-    for arr in (mean, estimate, lower, upper):
-        arr[2] += dx
-        arr[3] += dy
     pm, ps = product_moments(z_map, cov_z)
     s = space_scale()
     wv = np.zeros(5)
@@ -452,6 +452,12 @@ def identify(
     log_pm = float(np.log(denormalise_params(z_map)[0] * denormalise_params(z_map)[1]))
     sd_pm = float(np.sqrt(max(wv @ cov_z @ wv, 0.0)))
     notes = []
+    if chi2 > cfg.restart_chi2:
+        notes.append(
+            f"the fit stays poor (reduced χ² {chi2:.2f} > {cfg.restart_chi2} after "
+            f"{refined} start(s)): a local minimum, or pushes the replay cannot reproduce; the "
+            "intervals are widened by √χ² only and may be too narrow"
+        )
     if cf["mass"] is None:
         notes.append(
             "no release push: m and μ separate only through dynamic content (acceleration, "
