@@ -217,6 +217,11 @@ def render_report(results: dict, command: str, appendices: list[str] = ()) -> st
             method_table(s["methods"]),
             "",
         ]
+        out += [
+            f"*{name}*: {m['label']}.\n"
+            for name, m in s["methods"].items()
+            if m.get("upper_bound")
+        ]
         if set_name == "novel":
             out += [
                 "Novel = unseen shapes (pentagon, trapezoid, 2:1 ellipse, L-shape) alternating "
