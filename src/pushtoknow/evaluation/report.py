@@ -218,9 +218,7 @@ def render_report(results: dict, command: str, appendices: list[str] = ()) -> st
             "",
         ]
         out += [
-            f"*{name}*: {m['label']}.\n"
-            for name, m in s["methods"].items()
-            if m.get("upper_bound")
+            f"*{name}*: {m['label']}.\n" for name, m in s["methods"].items() if m.get("upper_bound")
         ]
         if set_name == "novel":
             out += [
