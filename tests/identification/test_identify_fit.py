@@ -98,3 +98,22 @@ def test_laplace_posterior_keeps_flat_directions_at_the_prior():
     step = np.array([0.0, 0.1, 0.0, 0.0, 0.0])
     with_step, *_ = laplace_posterior(h, step, prior, 0.1)
     assert with_step[1, 1] == pytest.approx(cov[1, 1] + 0.01)
+
+
+@pytest.mark.slow
+def test_novel_objects_with_mixed_pushes_end_to_end():
+    """Two novel objects, 5 full-length pushes (constant and release in turn): μ·m within 2%,
+    the CoM within 2 mm, m within 15%, every truth within 3.3 posterior std."""
+    from pushtoknow.evaluation.identification import run_identification_benchmark
+
+    res = run_identification_benchmark(2, 5, ["constant", "release"], seed=1, config=CFG)
+    assert res["mu_m_relative_error"]["max"] < 0.02
+    for row in res["per_object"]:
+        truth = np.array(row["truth"])
+        mean = np.array([row["parameters"][k]["mean"] for k in row["parameters"]])
+        assert np.hypot(*(mean[2:4] - truth[2:4])) < 2e-3
+        assert abs(mean[0] / truth[0] - 1) < 0.15
+        z = (normalise_params(truth) - np.array(row["mean_norm"])) / np.sqrt(
+            np.diagonal(np.array(row["cov_norm"]))
+        )
+        assert np.all(np.abs(z) < 3.3)
