@@ -18,6 +18,7 @@ RANKS = {
     "active": 5,
     "baselines": 5,
     "training": 6,
+    "identification": 6.5,  # simulator-in-the-loop fit: common, geometry, testbed, datasets
     "inference": 7,
     "collection": 7.5,  # runs inference to collect training data, trains models
     "evaluation": 8,

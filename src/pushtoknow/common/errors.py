@@ -41,3 +41,8 @@ class TestbedVersionError(PushToKnowError, ValueError):
 
 class UntrainedProfileError(PushToKnowError, ValueError):
     """Inference asked for a speed profile the model was never trained on."""
+
+
+class IdentificationError(PushToKnowError, ValueError):
+    """Physics-based identification cannot run on the input it was given (no pushes, no
+    footprint, a pusher track the simulator cannot replay); the message names the problem."""

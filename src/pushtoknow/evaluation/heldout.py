@@ -33,6 +33,8 @@ class HeldoutRun:
     features_truth: np.ndarray | None = None  # (N, K, F) forest features, true poses
     features_vision: np.ndarray | None = None  # (N, K, F) forest features, filtered poses
     profiles: list[list[str]] | None = None  # (N, K) speed profile of each executed push
+    push_actions: np.ndarray | None = None  # (N, K, 5) Push.as_array of each executed push
+    push_tracks: np.ndarray | None = None  # (N, K, T, 9) time, pose (3), tactile (3), pusher (2)
 
 
 def _run_one(args) -> dict:
@@ -80,7 +82,38 @@ def _run_one(args) -> dict:
         "truth": spec.params.as_array(),
         "seconds": time.perf_counter() - t0,
         "profiles": [rec.push.profile for rec in res.records],
+        "push_actions": np.stack([rec.push.as_array() for rec in res.records]),
+        "push_tracks": np.stack([track_array(rec) for rec in res.records]),
     }
+
+
+def track_array(rec) -> np.ndarray:
+    """(T, 9) what physics-based identification needs of a push record: time, pose (3),
+    tactile (3), pusher (2)."""
+    return np.column_stack([rec.time, rec.pose, rec.tactile, rec.pusher])
+
+
+def records_from_tracks(actions: np.ndarray, tracks: np.ndarray) -> list:
+    """PushRecords (no images, no clean force) from `track_array` rows and actions (K, 5)."""
+    from pushtoknow.testbed.push import Push
+    from pushtoknow.testbed.sim import PushRecord
+
+    out = []
+    for a, tr in zip(actions, tracks):
+        out.append(
+            PushRecord(
+                Push.from_array(a),
+                tr[:, 0],
+                tr[:, 1:4],
+                tr[:, 4:7],
+                tr[:, 4:6],
+                tr[:, 7:9],
+                None,
+                None,
+                None,
+            )
+        )
+    return out
 
 
 def heldout_object_ids(n: int, seed: int = 0) -> list[str]:
@@ -134,6 +167,8 @@ def evaluate_heldout(
         features_truth=np.stack([r["features_truth"] for r in out]),
         features_vision=np.stack([r["features_vision"] for r in out]),
         profiles=[r["profiles"] for r in out],
+        push_actions=np.stack([r["push_actions"] for r in out]),
+        push_tracks=np.stack([r["push_tracks"] for r in out]),
     )
 
 

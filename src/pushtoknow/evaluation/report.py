@@ -82,6 +82,8 @@ def per_push_table(methods: dict, param: str) -> str:
         "|---" * (k + 1) + "|",
     ]
     for name, m in methods.items():
+        if len(m["per_push"]) != k:  # e.g. the oracle: final estimate only
+            continue
         lines.append(f"| {name} | " + " | ".join(f"{r[param]:.3f}" for r in m["per_push"]) + " |")
     return "\n".join(lines)
 
@@ -217,6 +219,9 @@ def render_report(results: dict, command: str, appendices: list[str] = ()) -> st
             "",
             method_table(s["methods"]),
             "",
+        ]
+        out += [
+            f"*{name}*: {m['label']}.\n" for name, m in s["methods"].items() if m.get("upper_bound")
         ]
         if set_name == "novel":
             out += [

@@ -57,6 +57,7 @@ PRIOR = "prior-mean"
 FOREST = "forest"
 FOREST_VISNET = "forest-visnet"
 POLICIES = ("uniform", "random", "active-kl", "active-entropy")
+ORACLE_KEY = "oracle"  # evaluation.identification.ORACLE
 
 
 class EvaluationConfig(Config):
@@ -71,6 +72,12 @@ class EvaluationConfig(Config):
     workers: int = Field(2, ge=1)
     sigma_points: int | None = Field(None, ge=10)
     forest_trees: int = Field(200, ge=1)
+    oracle: bool = Field(
+        False,
+        description="add the `oracle` row: physics-based identification on the pushes the first "
+        "model made, with the true footprint and the simulator's own physics (an upper bound; "
+        "about 40 s per object on 2 cores)",
+    )
 
 
 @dataclass
@@ -205,6 +212,11 @@ def _save_run(path: Path, key: str, run: HeldoutRun) -> None:
         features_truth=run.features_truth,
         features_vision=run.features_vision,
         profiles=np.array(run.profiles),
+        **(
+            {}
+            if run.push_tracks is None
+            else {"push_actions": run.push_actions, "push_tracks": run.push_tracks}
+        ),
     )
     os.replace(tmp, path)  # atomic: a half-written cache is never read
 
@@ -226,6 +238,8 @@ def _load_run(path: Path, key: str) -> HeldoutRun | None:
             features_truth=f["features_truth"],
             features_vision=f["features_vision"],
             profiles=f["profiles"].tolist(),
+            push_actions=f["push_actions"] if "push_actions" in f.files else None,
+            push_tracks=f["push_tracks"] if "push_tracks" in f.files else None,
         )
 
 
@@ -368,12 +382,31 @@ def run_evaluation(
         )
         methods[FOREST] = _forest_run(forest, base.features_truth, base, prior)
         methods[FOREST_VISNET] = _forest_run(forest, base.features_vision, base, prior)
+        figure_methods = dict(methods)
+        if cfg.oracle:
+            from pushtoknow.evaluation.identification import ORACLE, oracle_run
+
+            if base.push_tracks is None:
+                say(f"{set_name}: no oracle row (cached inference runs hold no push tracks)")
+            else:
+                say(f"{set_name}: {ORACLE} (physics-based identification) on {n} objects")
+                adv = progress(f"{set_name} {ORACLE}", n) if progress else None
+                methods[ORACLE] = oracle_run(
+                    base, objects, loaded[0].sim_config, cfg.seed, cfg.workers, adv
+                )
         results["sets"][set_name] = {
             "objects": base.ids,
             "folds": cfg.folds,
             "methods": {k: summarise_method(r, folds, footprints) for k, r in methods.items()},
         }
-        runs_for_figures[set_name] = methods
+        if ORACLE_KEY in methods:
+            summary = results["sets"][set_name]["methods"][ORACLE_KEY]
+            summary["upper_bound"] = True
+            summary["label"] = (
+                "upper bound: the simulator's own physics, the true footprint, the same pushes; "
+                "final estimate only (per_push: prior, after all pushes)"
+            )
+        runs_for_figures[set_name] = figure_methods
     results["methods"] = results["sets"]["heldout"]["methods"]
     results["primary"] = f"{names[0]}:{cfg.policies[0]}"
     results["config"] = cfg.model_dump(mode="json")

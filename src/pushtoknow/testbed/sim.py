@@ -209,9 +209,23 @@ class PushSimulator:
         return back + u * lo
 
     def execute(
-        self, push: Push, rng: np.random.Generator, render: bool | None = None, trace: bool = False
+        self,
+        push: Push,
+        rng: np.random.Generator,
+        render: bool | None = None,
+        trace: bool = False,
+        start: np.ndarray | None = None,
+        stop_at_rest: float | None = None,
     ) -> PushRecord:
-        """Run one push from the current state; returns its record."""
+        """Run one push from the current state; returns its record.
+
+        start (2,): the pad's start (m, world); None finds it on the true geometry
+        (`pad_start`). Replaying a recorded push passes its `pusher[0]`.
+        stop_at_rest: once the pad has stopped for good and the object's speed is below this
+        (m/s, and the same in rad/s), stop simulating and hold the last pose, with zero force,
+        for the remaining samples (a release push's object at rest stays there, up to
+        MuJoCo's sub-micrometre creep); None simulates every sample.
+        """
         cfg = self.config
         render = cfg.render if render is None else render
         dt = self.model.opt.timestep
@@ -220,7 +234,7 @@ class PushSimulator:
         steps_per_sample = int(round(1.0 / (rate * dt)))
         profile = self.profile(push)
         u = push.unit
-        start = self.pad_start(push)
+        start = self.pad_start(push) if start is None else np.asarray(start, dtype=np.float64)
 
         T = n_samples + 1
         pose = np.zeros((T, 3))
@@ -256,8 +270,25 @@ class PushSimulator:
         self._set_pad(start, u * profile.speed(0.0))
         mujoco.mj_forward(model, data)
         step = 0
+        moving = [i for i, v in enumerate(profile.speeds) if v != 0.0]
+        pad_stops = (
+            np.inf
+            if not moving or moving[-1] == len(profile.speeds) - 1
+            else (profile.times[moving[-1] + 1])
+        )
+        if stop_at_rest is not None and render:
+            raise ValueError("stop_at_rest needs render=False (the held samples have no images)")
         try:
             for k in range(T):
+                if (
+                    stop_at_rest is not None
+                    and k > 1
+                    and time[k - 1] > pad_stops
+                    and np.all(np.abs(self.object_velocity()) < stop_at_rest)
+                ):
+                    pose[k:] = pose[k - 1]
+                    pusher[k:] = pusher[k - 1]
+                    break
                 if k > 0:
                     acc = np.zeros(2)
                     touching = 0

@@ -1,0 +1,81 @@
+"""Settings of the physics-based identifier (frozen, loadable from YAML)."""
+
+from __future__ import annotations
+
+import math
+
+from pydantic import Field
+
+from pushtoknow.common.config import Config
+
+
+class IdentifyConfig(Config):
+    """How `identify` weighs the data, searches and reports.
+
+    Noise model: the tactile force has the recording's own noise (`force_noise` None: the
+    `tactile.force_noise_std` of the simulation settings stored with the pushes); the pose
+    track is weighted as if measured to `position_noise` / `angle_noise` (a tracker's
+    resolution and the testbed's start-pose sensitivity, docs/PHYSICS.md: ≤ 0.23 mm / 0.27°).
+    """
+
+    force_noise: float | None = Field(None, gt=0, description="N; None: the recording's")
+    position_noise: float = Field(5e-4, gt=0, description="m, per pose sample")
+    angle_noise: float = Field(math.radians(0.5), gt=0, description="rad, per pose sample")
+    huber: float = Field(
+        3.0,
+        gt=0,
+        description="force residuals beyond this many noise std weigh linearly (robust to "
+        "contact glitches); pose residuals stay quadratic",
+    )
+    screen_starts: int = Field(
+        6, ge=0, description="prior draws screened (one rollout each) besides the closed-form start"
+    )
+    refine_starts: int = Field(
+        2, ge=1, description="at most this many of the best starts are refined (see `restart_chi2`)"
+    )
+    restart_chi2: float = Field(
+        1.2,
+        gt=0,
+        description="refine the next start only if the reduced χ² stays above this (≈ 1 at the "
+        "optimum when the noise model is right)",
+    )
+    max_iterations: int = Field(20, ge=1, description="Levenberg–Marquardt iterations per start")
+    step_tolerance: float = Field(
+        1e-3, gt=0, description="stop when no fit coordinate moves more than this (normalised)"
+    )
+    max_step: float = Field(
+        0.5, gt=0, description="largest change of a fit coordinate per iteration (normalised)"
+    )
+    cost_tolerance: float = Field(
+        0.05,
+        gt=0,
+        description="stop when an iteration lowers the objective by less than this (the "
+        "objective is χ²/2: one standard deviation along any direction is worth 0.5)",
+    )
+    fd_steps: tuple[float, float, float, float, float] = Field(
+        (0.01, 0.1, 0.02, 0.02, 0.15),
+        description="finite-difference step of each fit coordinate (log μ·m, log m at fixed "
+        "μ·m, c_x, c_y, log I_z; normalised units): large where the response is weak, so the "
+        "simulator's step-to-step jitter (a few χ² units) does not pose as information",
+    )
+    flat_information: float = Field(
+        10.0,
+        ge=0,
+        description="a direction whose data information is below this many times the prior's "
+        "is reported as not identified: it keeps the prior's width and the prior's estimate "
+        "(below ~10 the curvature is within reach of the simulator's step-to-step jitter of a "
+        "few χ² units, so a Laplace width there would not be honest)",
+    )
+    information_scale: float = Field(
+        0.3,
+        gt=0,
+        le=1,
+        description="share of the data information the posterior keeps (1: the Laplace "
+        "approximation as it is; 0.3 widens identified directions 1.8-fold for what the noise "
+        "model leaves out: the simulator's jitter and an optimum located only to within it; "
+        "chosen on 16 novel objects of seed 2, 5 mixed pushes, for 90% coverage)",
+    )
+    stop_at_rest: float = Field(
+        1e-4, gt=0, description="m/s: a replayed release push stops once pad and object rest"
+    )
+    workers: int = Field(2, ge=1, description="processes for the batched rollouts")

@@ -1,0 +1,490 @@
+"""`identify`: φ by simulator-in-the-loop least squares, with honest uncertainty.
+
+Objective (maximum a posteriori): Σ ρ(r_i) + ½ (u − ū)ᵀ P_u⁻¹ (u − ū), where r are the misfits of
+every replayed push against the recording in noise units (tactile force over its noise std,
+pose over the assumed tracking noise), ρ the Huber loss (quadratic within `huber` std, linear
+beyond, so one bad sample or a contact glitch cannot dominate) and the Gaussian term the prior
+of `prior.prior_moments`, in the fit coordinates u of `prior.fit_transform` (log μ·m, log m at
+fixed μ·m, CoM, log I_z: positive m, μ, I_z by construction, the μ·m ridge along an axis).
+
+Search: a closed-form start (μ·m from the steady force of constant pushes, m and μ from the
+acceleration and free slide of release pushes, `testbed.fidelity.read_release`; CoM at the
+centroid, I_z at the prior mean) and `screen_starts` draws from the prior (μ·m kept at the
+closed-form value) are screened with one batched rollout each; the best is refined by
+Levenberg–Marquardt with iteratively reweighted (Huber) Gauss–Newton steps and forward
+difference Jacobians (one batch of 5 rollouts per iteration; the testbed is not chaotic, so
+finite differences are smooth). The next start is refined only if the fit stays poor
+(reduced χ² above `restart_chi2`). Candidates outside the simulable set (CoM within the
+testbed's margin of the edge, I_z below the footprint's bound) are projected onto it and pay a
+penalty residual, so the search stays inside.
+
+Uncertainty: Laplace at the optimum, combined with the prior: the data information JᵀWJ
+(scaled by the reduced χ² when that exceeds 1) is diagonalised in prior-whitened
+coordinates; a direction carrying less than `flat_information` of the prior's information is
+reported as not identified and its data information dropped, so it keeps exactly the prior's
+width, never a narrow width from a flat or noisy curvature. Posterior cov = (H_data + P⁻¹)⁻¹
+plus δδᵀ, δ the last Gauss–Newton step (a polish with a central-difference Jacobian): how far
+the optimum may still be from where the search stopped.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.stats import norm
+
+from pushtoknow.common.errors import IdentificationError
+from pushtoknow.common.params import (
+    GRAVITY,
+    PARAM_NAMES,
+    denormalise_params,
+    normalise_params,
+    product_moments,
+    si_moments,
+    space_scale,
+)
+from pushtoknow.identification.config import IdentifyConfig
+from pushtoknow.identification.prior import fit_transform, prior_moments
+from pushtoknow.identification.replay import (
+    PushTrack,
+    ReplayScene,
+    RolloutPool,
+    feasible,
+)
+from pushtoknow.testbed.config import SimConfig, check_testbed_version
+from pushtoknow.testbed.push import pad_positions
+from pushtoknow.testbed.sim import PushRecord
+
+TRACK_TOLERANCE = 1e-3  # m: a recorded pad track may depart this far from its commanded profile
+PENALTY_SCALE = 1e-3  # m of CoM projection (or 0.1 % of I_z excess) per unit penalty residual
+LEVEL = 0.9
+
+
+@dataclass(frozen=True)
+class Identification:
+    """Result of `identify`, SI unless stated.
+
+    mean, std (5,): posterior moments in PARAM_NAMES order (log-normal for m, μ, I_z);
+    estimate (5,): the MAP point; lower, upper (5,): equal-tailed `level` interval (asymmetric
+    for m, μ, I_z); mean_norm (5,), cov_norm (5, 5): the Gaussian posterior over the normalised
+    parameters (`common.params.normalise_params`); mu_m, mu_m_std, mu_m_interval: μ·m (kg);
+    unidentified: the directions the pushes did not reveal (kept at the prior's width), each
+    as a combination of normalised parameters; information (5,): data information of the
+    prior-whitened eigendirections (1 = as much as the prior), descending; chi2: reduced χ² of
+    the weighted misfit at the optimum; rollouts: candidate φ replayed over all pushes;
+    push_rollouts: single push replays; seconds: wall time.
+    """
+
+    mean: np.ndarray
+    std: np.ndarray
+    estimate: np.ndarray
+    lower: np.ndarray
+    upper: np.ndarray
+    mean_norm: np.ndarray
+    cov_norm: np.ndarray
+    mu_m: float
+    mu_m_std: float
+    mu_m_interval: tuple[float, float]
+    unidentified: tuple[str, ...]
+    information: np.ndarray
+    chi2: float
+    rollouts: int
+    push_rollouts: int
+    iterations: int
+    starts: int
+    seconds: float
+    pushes: int
+    profiles: tuple[str, ...]
+    level: float = LEVEL
+    notes: tuple[str, ...] = field(default=())
+    data_information: np.ndarray | None = None  # (5, 5) fit coordinates, unscaled
+    last_step: np.ndarray | None = None  # (5,) fit coordinates
+
+    def zscore(self, truth) -> np.ndarray:
+        """(5,) z-scores of a true φ (SI) in the normalised space where the belief is Gaussian."""
+        z = normalise_params(np.asarray(truth, dtype=np.float64))
+        return (z - self.mean_norm) / np.sqrt(np.diagonal(self.cov_norm))
+
+    def as_dict(self) -> dict:
+        per = {
+            k: {
+                "mean": float(self.mean[i]),
+                "std": float(self.std[i]),
+                "estimate": float(self.estimate[i]),
+                "interval": [float(self.lower[i]), float(self.upper[i])],
+            }
+            for i, k in enumerate(PARAM_NAMES)
+        }
+        return {
+            "method": "physics-based identification (simulator in the loop, Laplace + prior)",
+            "parameters": per,
+            "interval_level": self.level,
+            "mu_m": {
+                "mean": self.mu_m,
+                "std": self.mu_m_std,
+                "interval": list(self.mu_m_interval),
+            },
+            "unidentified": list(self.unidentified),
+            "information": self.information.tolist(),
+            "mean_norm": self.mean_norm.tolist(),
+            "cov_norm": self.cov_norm.tolist(),
+            "reduced_chi2": self.chi2,
+            "rollouts": self.rollouts,
+            "push_rollouts": self.push_rollouts,
+            "iterations": self.iterations,
+            "starts_refined": self.starts,
+            "seconds": self.seconds,
+            "pushes": self.pushes,
+            "profiles": list(self.profiles),
+            "notes": list(self.notes),
+            "data_information_fit": None
+            if self.data_information is None
+            else self.data_information.tolist(),
+            "last_step_fit": None if self.last_step is None else self.last_step.tolist(),
+        }
+
+
+def tracks_from_records(records: Sequence[PushRecord], sim_config: SimConfig) -> list[PushTrack]:
+    """The pushes to replay. Raises IdentificationError if there are none, if they differ in
+    length, or if a recorded pad track departs from its commanded profile (the replay drives
+    the commanded profile from the recorded start)."""
+    if not records:
+        raise IdentificationError("no pushes to identify from")
+    lengths = {len(r.time) for r in records}
+    if len(lengths) != 1:
+        raise IdentificationError(f"pushes of different lengths {sorted(lengths)} samples")
+    tracks = []
+    for i, r in enumerate(records):
+        try:
+            want = pad_positions(r.push, r.time, sim_config.push, start=r.pusher[0])
+        except ValueError as e:
+            raise IdentificationError(f"push {i}: {e}") from None
+        dev = float(np.max(np.linalg.norm(want - r.pusher, axis=1)))
+        if dev > TRACK_TOLERANCE:
+            raise IdentificationError(
+                f"push {i}: the recorded pad track departs {dev * 1e3:.1f} mm from its "
+                f"{r.push.profile} profile; only pushes that follow the testbed's speed "
+                "profiles can be replayed"
+            )
+        tracks.append(
+            PushTrack(r.push, r.pusher[0].copy(), r.pose[0].copy(), r.tactile[:, :2], r.pose)
+        )
+    return tracks
+
+
+def closed_form_start(records: Sequence[PushRecord], sim_config: SimConfig) -> dict:
+    """Rough φ from the records alone: {"mu_m": kg, "mass": kg or None, "friction": or None}.
+    μ·m: largest median force magnitude of a constant push in steady contact (≤ μ·m·g; equal
+    on a centred push) over g; m and μ: medians of `testbed.fidelity.read_release` over
+    release pushes (acceleration F = m(μg + a), free slide v²/(2μg))."""
+    from pushtoknow.testbed.fidelity import read_release
+
+    forces, masses, frictions = [], [], []
+    for r in records:
+        if r.push.profile == "constant":
+            steady = (r.time >= 1.0) & (r.tactile[:, 2] >= 0.5)
+            if steady.any():
+                forces.append(float(np.median(np.linalg.norm(r.tactile[steady, :2], axis=1))))
+        elif r.push.profile == "release":
+            try:
+                reading = read_release(r, sim_config)
+            except (ValueError, ZeroDivisionError, FloatingPointError):
+                continue
+            if np.isfinite(reading.friction) and 0.05 < reading.friction < 2.0:
+                frictions.append(reading.friction)
+                if np.isfinite(reading.mass) and 0.02 < reading.mass < 10.0:
+                    masses.append(reading.mass)
+    mass = float(np.median(masses)) if masses else None
+    friction = float(np.median(frictions)) if frictions else None
+    if forces:
+        mu_m = max(forces) / GRAVITY
+    elif mass is not None and friction is not None:
+        mu_m = mass * friction
+    else:
+        mu_m = None
+    return {"mu_m": mu_m, "mass": mass, "friction": friction}
+
+
+def _huber_weights(r: np.ndarray, k: float, robust: np.ndarray) -> np.ndarray:
+    a = np.abs(r)
+    return np.where(robust & (a > k), k / np.maximum(a, 1e-300), 1.0)
+
+
+def _huber(r: np.ndarray, k: float, robust: np.ndarray) -> float:
+    a = np.abs(r)
+    return float(np.sum(np.where(robust & (a > k), k * a - 0.5 * k * k, 0.5 * a * a)))
+
+
+def _describe(direction_z: np.ndarray) -> str:
+    """A unit direction over the normalised parameters as text, e.g. "+1.00 inertia"."""
+    d = direction_z / np.linalg.norm(direction_z)
+    d = d if d[np.argmax(np.abs(d))] > 0 else -d
+    parts = [f"{c:+.2f} {k}" for c, k in zip(d, PARAM_NAMES) if abs(c) >= 0.2]
+    return " ".join(parts)
+
+
+def laplace_posterior(
+    h_data: np.ndarray,
+    last_step: np.ndarray,
+    prior_cov: np.ndarray,
+    flat_information: float,
+    information_scale: float = 1.0,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Posterior covariance (5, 5) in fit coordinates from the data information h_data (5, 5)
+    at the optimum, the prior covariance and the last Gauss–Newton step (5,).
+
+    The data information, times `information_scale`, is diagonalised in prior-whitened
+    coordinates (eigenvalue 1 = as informative as the prior); eigenvalues below
+    `flat_information` are dropped (those directions keep the prior's width), the rest combine
+    with the prior, and the last step's outer product is added. Returns (cov, eigenvalues (5,)
+    ascending, eigenvectors (5, 5) in whitened coordinates, flat (5,) bool)."""
+    chol = np.linalg.cholesky(prior_cov)
+    white = chol.T @ (information_scale * h_data) @ chol
+    lam, vecs = np.linalg.eigh(0.5 * (white + white.T))
+    lam = np.clip(lam, 0.0, None)
+    flat = lam < flat_information
+    kept = np.where(flat, 0.0, lam)
+    cov = chol @ vecs @ np.diag(1.0 / (1.0 + kept)) @ vecs.T @ chol.T
+    cov += np.outer(last_step, last_step)
+    return 0.5 * (cov + cov.T), lam, vecs, flat
+
+
+class _Problem:
+    """Residuals of candidate fit coordinates u (B, 5), batched."""
+
+    def __init__(self, scene, tracks, pool, sigmas, footprint):
+        self.scene, self.tracks, self.pool = scene, tracks, pool
+        self.sigmas = sigmas  # (5,) force, force, x, y, θ
+        self.footprint = footprint
+        self.t_inv = np.linalg.inv(fit_transform())
+        obs = np.stack([np.column_stack([t.force, t.pose]) for t in tracks])  # (K, T, 5)
+        self.obs = obs[:, 1:]
+        self.n_data = self.obs.size
+        robust = np.zeros(self.obs.shape, dtype=bool)
+        robust[..., :2] = True  # the Huber loss applies to the force samples
+        self.robust = robust.reshape(-1)
+
+    def phi(self, u: np.ndarray) -> np.ndarray:
+        return denormalise_params(np.atleast_2d(u) @ self.t_inv.T)
+
+    def residuals(self, us: np.ndarray) -> np.ndarray:
+        """(B, n_data + 2) residuals in noise units, the last two the feasibility penalties."""
+        phis = self.phi(us)
+        feas = [feasible(p, self.footprint) for p in phis]
+        sims = self.pool.run(self.scene, np.stack([f[0] for f in feas]), self.tracks)
+        data = (sims[:, :, 1:] - self.obs[None]) / self.sigmas
+        pen = np.array([[m / PENALTY_SCALE, e / PENALTY_SCALE] for _, m, e in feas])
+        return np.concatenate([data.reshape(len(us), -1), pen], axis=1)
+
+
+def identify(
+    records: Sequence[PushRecord],
+    scene: ReplayScene,
+    config: IdentifyConfig | None = None,
+    seed: int = 0,
+    progress: Callable[[int], None] | None = None,
+    pool: RolloutPool | None = None,
+) -> Identification:
+    """Fit φ to recorded pushes of one object by replaying them in the testbed's scene.
+
+    records: the object's pushes (K, each T samples); scene: its footprint and the simulation
+    settings the pushes were recorded with. progress(n) is called with the number of candidate
+    φ replayed after every batch. Same inputs and seed, same result (any number of workers).
+    """
+    cfg = config or IdentifyConfig()
+    t0 = time.perf_counter()
+    check_testbed_version(scene.sim_config, "the pushes")
+    tracks = tracks_from_records(records, scene.sim_config)
+    footprint = scene.footprint
+    sigma_f = cfg.force_noise or max(scene.sim_config.tactile.force_noise_std, 1e-3)
+    sigmas = np.array([sigma_f, sigma_f, cfg.position_noise, cfg.position_noise, cfg.angle_noise])
+    own_pool = pool is None
+    pool = pool or RolloutPool(cfg.workers)
+    start_rollouts, start_push = pool.rollouts, pool.push_rollouts
+
+    tmat = fit_transform()
+    z_prior, p_z = prior_moments()
+    u_prior = tmat @ z_prior
+    p_u = tmat @ p_z @ tmat.T
+    p_u_inv = np.linalg.inv(p_u)
+    chol = np.linalg.cholesky(p_u)
+
+    def report(n: int) -> None:
+        if progress is not None:
+            progress(n)
+
+    try:
+        prob = _Problem(scene, tracks, pool, sigmas, footprint)
+
+        def costs(res: np.ndarray, us: np.ndarray) -> np.ndarray:
+            n = prob.n_data
+            out = []
+            for r, u in zip(res, us):
+                d = u - u_prior
+                out.append(
+                    _huber(r[:n], cfg.huber, prob.robust)
+                    + 0.5 * float(r[n:] @ r[n:])
+                    + 0.5 * d @ p_u_inv @ d
+                )
+            return np.array(out)
+
+        # ---- starts: closed form + prior draws, screened by one batched rollout
+        cf = closed_form_start(records, scene.sim_config)
+        z_cf = z_prior.copy()
+        i_m, i_mu = PARAM_NAMES.index("mass"), PARAM_NAMES.index("friction")
+        mass0 = cf["mass"] if cf["mass"] is not None else float(denormalise_params(z_prior)[i_m])
+        z_cf[i_m] = normalise_params(np.array([mass0, 0.5, 0, 0, 1e-3]))[i_m]
+        if cf["mu_m"] is not None:
+            z_cf[i_mu] = normalise_params(np.array([1.0, cf["mu_m"] / mass0, 0, 0, 1e-3]))[i_mu]
+        z_cf[2:4] = normalise_params(np.array([1.0, 0.5, 0.0, 0.0, 1e-3]))[2:4]
+        rng = np.random.default_rng(seed)
+        starts = [tmat @ z_cf]
+        for _ in range(cfg.screen_starts):
+            z = rng.multivariate_normal(z_prior, p_z)
+            u = tmat @ z
+            u[0] = starts[0][0]
+            starts.append(u)
+        starts = np.stack(starts)
+        res = prob.residuals(starts)
+        report(len(starts))
+        order = np.argsort(costs(res, starts), kind="stable")
+
+        n = prob.n_data
+        best = None
+        iterations = refined = 0
+        fd = np.asarray(cfg.fd_steps, dtype=np.float64)
+        for idx in order[: cfg.refine_starts]:
+            refined += 1
+            u, r = starts[idx].copy(), res[idx]
+            cost = costs(r[None], u[None])[0]
+            lam = 1e-2
+            for _ in range(cfg.max_iterations):
+                iterations += 1
+                probe = u[None] + np.diag(fd)
+                rj = prob.residuals(probe)
+                report(5)
+                jac = ((rj - r[None]) / fd[:, None]).T  # (n + 2, 5)
+                w = np.concatenate(
+                    [_huber_weights(r[:n], cfg.huber, prob.robust), np.ones(len(r) - n)]
+                )
+                h = jac.T @ (w[:, None] * jac) + p_u_inv
+                g = jac.T @ (w * r) + p_u_inv @ (u - u_prior)
+                moved, previous = False, cost
+                for _ in range(4):
+                    step = np.linalg.solve(h + lam * np.diag(np.diagonal(h)), -g)
+                    step *= min(1.0, cfg.max_step / max(np.max(np.abs(step)), 1e-300))
+                    trial = u + step
+                    rt = prob.residuals(trial[None])[0]
+                    report(1)
+                    ct = costs(rt[None], trial[None])[0]
+                    if ct < cost:
+                        u, r, cost, lam = trial, rt, ct, max(lam / 3.0, 1e-6)
+                        moved = True
+                        break
+                    lam *= 4.0
+                if (
+                    not moved
+                    or np.max(np.abs(step)) < cfg.step_tolerance
+                    or previous - cost < cfg.cost_tolerance
+                ):
+                    break
+            chi2 = float(np.sum(r[:n] ** 2) / max(n - 5, 1))
+            if best is None or cost < best[2]:
+                best = (u, r, cost, chi2)
+            if best[3] <= cfg.restart_chi2:
+                break
+        u, r, cost, chi2 = best
+
+        # ---- Laplace at the optimum, combined with the prior
+        probe = np.concatenate([u[None] + np.diag(fd), u[None] - np.diag(fd)])
+        rj = prob.residuals(probe)
+        report(10)
+        jac = ((rj[:5] - rj[5:]) / (2 * fd[:, None])).T  # central differences
+        w = np.concatenate([_huber_weights(r[:n], cfg.huber, prob.robust), np.ones(len(r) - n)])
+        # one Gauss–Newton polish with the central Jacobian; the optimum is known only to
+        # within this last step, so its outer product joins the covariance below
+        h_full = jac.T @ (w[:, None] * jac) + p_u_inv
+        newton = np.linalg.solve(h_full, -(jac.T @ (w * r) + p_u_inv @ (u - u_prior)))
+        newton *= min(1.0, cfg.max_step / max(np.max(np.abs(newton)), 1e-300))
+        trial = u + newton
+        rt = prob.residuals(trial[None])[0]
+        report(1)
+        if costs(rt[None], trial[None])[0] < cost:
+            u, r = trial, rt
+            chi2 = float(np.sum(r[:n] ** 2) / max(n - 5, 1))
+        h_data = jac.T @ (w[:, None] * jac) * (1.0 / max(1.0, chi2))
+        cov_u, lam_d, vecs, flat = laplace_posterior(
+            h_data, newton, p_u, cfg.flat_information, cfg.information_scale
+        )
+        # along a direction the pushes do not reveal, the estimate is the prior's (given the
+        # identified coordinates), as the information dropped there would have it
+        w_u = np.linalg.solve(chol, u - u_prior)
+        for j in np.where(flat)[0]:
+            w_u -= vecs[:, j] * float(vecs[:, j] @ w_u)
+        u = u_prior + chol @ w_u
+        t_inv = np.linalg.inv(tmat)
+        z_map = t_inv @ u
+        cov_z = t_inv @ cov_u @ t_inv.T
+        cov_z = 0.5 * (cov_z + cov_z.T)
+        unidentified = tuple(_describe(t_inv @ chol @ vecs[:, j]) for j in np.where(flat)[0])
+    finally:
+        if own_pool:
+            pool.close()
+
+    # ---- SI summaries, the CoM in the record's object frame
+    estimate = feasible(denormalise_params(z_map), footprint)[0]
+    dx, dy = scene.frame_offset
+    estimate[2:4] += (dx, dy)
+    z_map = z_map.copy()
+    z_map[2:4] += np.array([dx, dy]) / space_scale()[2:4]  # the CoM is normalised linearly
+    mean, std = si_moments(z_map, cov_z)
+    sd = np.sqrt(np.diagonal(cov_z))
+    q = norm.ppf(0.5 + LEVEL / 2)
+    lower = denormalise_params(z_map - q * sd)
+    upper = denormalise_params(z_map + q * sd)
+    pm, ps = product_moments(z_map, cov_z)
+    s = space_scale()
+    wv = np.zeros(5)
+    wv[[0, 1]] = s[[0, 1]]
+    log_pm = float(np.log(denormalise_params(z_map)[0] * denormalise_params(z_map)[1]))
+    sd_pm = float(np.sqrt(max(wv @ cov_z @ wv, 0.0)))
+    notes = []
+    if chi2 > cfg.restart_chi2:
+        notes.append(
+            f"the fit stays poor (reduced χ² {chi2:.2f} > {cfg.restart_chi2} after "
+            f"{refined} start(s)): a local minimum, or pushes the replay cannot reproduce; the "
+            "intervals are widened by √χ² only and may be too narrow"
+        )
+    if cf["mass"] is None:
+        notes.append(
+            "no release push: m and μ separate only through dynamic content (acceleration, "
+            "free slide), so constant pushes leave them at the prior except for μ·m"
+        )
+    return Identification(
+        mean=mean,
+        std=std,
+        estimate=estimate,
+        lower=lower,
+        upper=upper,
+        mean_norm=z_map,
+        cov_norm=cov_z,
+        mu_m=pm,
+        mu_m_std=ps,
+        mu_m_interval=(float(np.exp(log_pm - q * sd_pm)), float(np.exp(log_pm + q * sd_pm))),
+        unidentified=unidentified,
+        information=lam_d[::-1].copy(),
+        chi2=chi2,
+        rollouts=pool.rollouts - start_rollouts,
+        push_rollouts=pool.push_rollouts - start_push,
+        iterations=iterations,
+        starts=refined,
+        seconds=time.perf_counter() - t0,
+        pushes=len(tracks),
+        profiles=tuple(sorted({t.push.profile for t in tracks})),
+        notes=tuple(notes),
+        data_information=h_data,
+        last_step=newton,
+    )

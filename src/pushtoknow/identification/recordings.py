@@ -1,0 +1,173 @@
+"""Recorded pushes to identify from, read from the project's dataset format
+(`datasets.shards`), and the footprint to identify with: the one stored with the pushes, one
+given, or one estimated from the first image's mask S_0 and the camera model."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from pushtoknow.common.errors import DatasetError, IdentificationError, ObjectSpecError
+from pushtoknow.identification.replay import ReplayScene
+from pushtoknow.testbed.config import SimConfig, stored_sim_config
+from pushtoknow.testbed.objects import NOVEL_SHAPES, resolve_shape
+from pushtoknow.testbed.shapes import CATALOGUE_SHAPES, footprint_from_shape
+from pushtoknow.testbed.sim import PushRecord
+
+MASK_SIMPLIFY = 5e-4  # m: tolerance of the polygon simplification of a mask's contour
+
+
+@dataclass(frozen=True)
+class RecordedObject:
+    """One object's recorded pushes. shape: the footprint stored with them (object frame);
+    height (m); truth (5,) SI: the parameters stored with them (the simulator's truth; a
+    recording of a real object stores its catalogue values) or None; sim_config: the settings
+    the pushes were recorded with."""
+
+    name: str
+    index: int
+    shape: dict | None
+    height: float
+    truth: np.ndarray | None
+    records: tuple[PushRecord, ...]
+    sim_config: SimConfig
+
+
+def _shard_paths(path: Path) -> list[Path]:
+    from pushtoknow.datasets.shards import SHARD_GLOB, list_shards
+
+    path = Path(path)
+    if path.is_file():
+        return [path]
+    if not path.exists():
+        raise IdentificationError(f"--pushes {path}: no such dataset directory or shard file")
+    shards = list_shards(path)
+    if not shards:
+        raise IdentificationError(f"--pushes {path}: empty dataset (no {SHARD_GLOB} files)")
+    return shards
+
+
+def load_recorded_objects(path: Path) -> list[RecordedObject]:
+    """Every object of a dataset directory (or one shard file), pushes without images (S_0
+    kept). Raises DatasetError / IdentificationError naming the problem."""
+    from pushtoknow.datasets.shards import open_shard, read_push
+
+    out = []
+    for shard in _shard_paths(path):
+        with open_shard(shard) as f:
+            sim_config = stored_sim_config(f.attrs.get("sim_config"))
+            for key in sorted(f["objects"], key=int):
+                g = f["objects"][key]
+                try:
+                    d = json.loads(g.attrs["spec"])
+                    pushes = g["pushes"]
+                except (KeyError, json.JSONDecodeError) as e:
+                    raise DatasetError(
+                        shard, f"object {key}: no readable spec or pushes ({e})"
+                    ) from None
+                truth = (
+                    np.asarray(g.attrs["params"], dtype=np.float64) if "params" in g.attrs else None
+                )
+                records = tuple(
+                    read_push(shard, pushes[k], images=False) for k in sorted(pushes, key=int)
+                )
+                shape = d.get("shape")
+                out.append(
+                    RecordedObject(
+                        name=str(d.get("name", f"object {key}")),
+                        index=int(g.attrs.get("object_index", key)),
+                        shape=resolve_shape(shape) if shape is not None else None,
+                        height=float(d.get("height", 0.013)),
+                        truth=truth,
+                        records=records,
+                        sim_config=sim_config,
+                    )
+                )
+    if not out:
+        raise IdentificationError(f"--pushes {path}: the dataset holds no objects")
+    return out
+
+
+def parse_shape(text: str) -> dict:
+    """A footprint given by the user: a catalogue or novel shape name ("rect1", "pentagon"), an
+    inline JSON shape (`{"type": "polygon", ...}`) or object spec (with "shape"), or a JSON/YAML
+    file holding either. Returns the shape dict (validated)."""
+    if text in CATALOGUE_SHAPES:
+        shape = CATALOGUE_SHAPES[text]
+    elif text in NOVEL_SHAPES:
+        shape = NOVEL_SHAPES[text]
+    else:
+        if text.lstrip().startswith("{"):
+            try:
+                data = json.loads(text)
+            except json.JSONDecodeError as e:
+                raise IdentificationError(f"--shape: not valid JSON ({e})") from None
+        else:
+            p = Path(text)
+            if not p.is_file():
+                raise IdentificationError(
+                    f"--shape {text!r}: no such file or shape name (shape names: "
+                    f"{', '.join([*CATALOGUE_SHAPES, *NOVEL_SHAPES])}; or dataset, from-mask)"
+                )
+            try:
+                data = yaml.safe_load(p.read_text())
+            except yaml.YAMLError as e:
+                raise IdentificationError(f"--shape {text}: not valid JSON/YAML ({e})") from None
+        if isinstance(data, dict) and "shape" in data:
+            data = data["shape"]
+        shape = resolve_shape(data) if isinstance(data, str) else data
+    footprint_from_shape(shape)  # raises ObjectSpecError naming the field
+    return shape
+
+
+def footprint_from_mask(obj: RecordedObject) -> tuple[dict, tuple[float, float]]:
+    """The footprint seen in the first push's S_0 (top face, camera of the stored settings),
+    in the object frame of the recorded pose track. Returns (shape dict, frame offset: the
+    mask polygon's centroid in that frame, m)."""
+    from shapely.geometry import Polygon
+
+    from pushtoknow.geometry.affordances import mask_contour
+
+    rec = obj.records[0]
+    if rec.s0 is None or not np.asarray(rec.s0).any():
+        raise IdentificationError(f"{obj.name}: no object mask S_0 to estimate the footprint from")
+    camera = obj.sim_config.camera.model()
+    contour = mask_contour(np.asarray(rec.s0, dtype=bool), camera, z=obj.height)
+    x, y, th = map(float, rec.pose[0])
+    c, s = np.cos(-th), np.sin(-th)
+    d = contour.points - np.array([x, y])
+    local = np.column_stack([c * d[:, 0] - s * d[:, 1], s * d[:, 0] + c * d[:, 1]])
+    poly = Polygon(local).buffer(0).simplify(MASK_SIMPLIFY)
+    if poly.geom_type != "Polygon" or poly.area <= 0:
+        raise IdentificationError(f"{obj.name}: the mask S_0 gives no simple footprint")
+    centroid = poly.centroid
+    verts = np.asarray(poly.exterior.coords)[:-1]
+    return {"type": "polygon", "vertices": verts.tolist()}, (centroid.x, centroid.y)
+
+
+def replay_scene(
+    obj: RecordedObject, shape: str = "dataset", stop_at_rest: float = 1e-4
+) -> ReplayScene:
+    """The scene to identify `obj` in. shape: "dataset" (the footprint stored with the pushes),
+    "from-mask" (`footprint_from_mask`) or a footprint for `parse_shape`."""
+    sim = obj.sim_config.model_copy(update={"render": False})
+    offset = (0.0, 0.0)
+    if shape == "dataset":
+        if obj.shape is None:
+            raise IdentificationError(
+                f"{obj.name}: the dataset stores no footprint; pass --shape SHAPE or from-mask"
+            )
+        fp_shape = obj.shape
+    elif shape == "from-mask":
+        fp_shape, offset = footprint_from_mask(obj)
+    else:
+        fp_shape = parse_shape(shape)
+    try:
+        footprint_from_shape(fp_shape)
+    except ObjectSpecError as e:
+        raise IdentificationError(f"{obj.name}: unusable footprint ({e})") from None
+    return ReplayScene(fp_shape, obj.height, sim, offset, stop_at_rest)

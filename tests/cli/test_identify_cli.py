@@ -1,0 +1,72 @@
+"""`pushtoknow identify` as a user runs it: estimates as JSON, one-line errors (exit 2)."""
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import h5py
+
+sys.path.insert(0, str(Path(__file__).parents[1] / "identification"))
+from identify_data import write_tiny_dataset
+
+EXE = [sys.executable, "-m", "pushtoknow.cli"]
+
+
+def run(*args):
+    return subprocess.run(
+        [*EXE, *args], capture_output=True, text=True, env=dict(os.environ), check=False
+    )
+
+
+def _one_line_error(r, *words):
+    assert r.returncode == 2, r.stderr
+    assert "Traceback" not in r.stderr
+    lines = [x for x in r.stderr.strip().splitlines() if x.strip()]
+    assert len(lines) == 1, r.stderr
+    for w in words:
+        assert w in lines[0], lines[0]
+
+
+def test_identify_prints_estimates_as_json(tmp_path):
+    ds = write_tiny_dataset(tmp_path / "ds")
+    r = run("identify", "--pushes", str(ds), "--workers", "1", "--seed", "0", "--json")
+    assert r.returncode == 0, r.stderr
+    out = json.loads(r.stdout)
+    (obj,) = out["objects"]
+    p = obj["parameters"]
+    assert set(p) == {"mass", "friction", "com_x", "com_y", "inertia"}
+    lo, hi = obj["mu_m"]["interval"]
+    assert lo <= 0.25 <= hi  # μ·m of the tiny object
+    assert obj["rollouts"] > 0 and obj["profiles"] == ["constant"]
+    assert any("inertia" in d for d in obj["unidentified"])
+
+
+def test_bad_inputs_give_one_line_errors(tmp_path):
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    _one_line_error(run("identify", "--pushes", str(empty)), "empty dataset")
+    bad = tmp_path / "bad"
+    bad.mkdir()
+    with h5py.File(bad / "shard-00000.h5", "w") as f:
+        f.attrs["schema_version"] = 7
+    _one_line_error(run("identify", "--pushes", str(bad)), "schema version 7")
+    ds = write_tiny_dataset(tmp_path / "ds")
+    _one_line_error(
+        run("identify", "--pushes", str(ds), "--shape", "missing.json"),
+        "no such file or shape name",
+    )
+
+
+def test_identify_bench_reports_accuracy_coverage_and_compute(tmp_path):
+    out = tmp_path / "bench.json"
+    args = ["--objects", "1", "--pushes", "1", "--profiles", "constant", "--workers", "1"]
+    r = run("identify-bench", *args, "--seed", "3", "--out", str(out), "--json")
+    assert r.returncode == 0, r.stderr
+    res = json.loads(r.stdout)
+    assert json.loads(out.read_text())["nrmse"] == res["nrmse"]
+    assert set(res["coverage90"]) == {"mass", "friction", "com_x", "com_y", "inertia", "overall"}
+    assert res["mu_m_relative_error"]["max"] < 0.02  # one constant push measures μ·m
+    assert res["rollouts_per_object"]["median"] > 0 and res["seconds_per_object"]["median"] > 0
+    assert res["profiles"] == ["constant"]

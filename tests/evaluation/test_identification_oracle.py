@@ -1,0 +1,54 @@
+"""The evaluation's `oracle` row and the identification benchmark's bookkeeping."""
+
+import numpy as np
+
+from pushtoknow.common.params import ObjectParams
+from pushtoknow.evaluation.heldout import HeldoutRun, records_from_tracks, track_array
+from pushtoknow.evaluation.identification import oracle_run, push_profiles
+from pushtoknow.evaluation.suite import summarise_method
+from pushtoknow.identification.synthetic import simulate_pushes
+from pushtoknow.testbed.config import SimConfig
+from pushtoknow.testbed.objects import ObjectSpec
+
+SHORT = SimConfig(render=False).model_copy(
+    update={"push": SimConfig().push.model_copy(update={"horizon": 2.0})}
+)
+
+
+def test_push_profiles_alternate():
+    assert push_profiles(["constant", "release"], 5) == [
+        "constant",
+        "release",
+        "constant",
+        "release",
+        "constant",
+    ]
+
+
+def test_oracle_row_from_the_pushes_a_model_made():
+    spec = ObjectSpec("rect1", ObjectParams(0.4, 0.6, 0.0, 0.01, 1.0e-3), name="o")
+    records = simulate_pushes(spec, ["constant"], seed=1, config=SHORT)
+    back = records_from_tracks(
+        np.stack([r.push.as_array() for r in records]), np.stack([track_array(r) for r in records])
+    )
+    assert back[0].push == records[0].push
+    np.testing.assert_array_equal(back[0].pose, records[0].pose)
+    np.testing.assert_array_equal(back[0].pusher, records[0].pusher)
+    truth = spec.params.as_array()
+    base = HeldoutRun(
+        mean=np.zeros((1, 2, 5)),
+        std=np.ones((1, 2, 5)),
+        zscore=np.zeros((1, 2, 5)),
+        product=np.zeros((1, 2)),
+        truth=truth[None],
+        ids=["o"],
+        seconds=[0.0],
+        push_actions=np.stack([r.push.as_array() for r in records])[None],
+        push_tracks=np.stack([track_array(r) for r in records])[None],
+    )
+    run = oracle_run(base, [spec.to_json()], SHORT, seed=0, workers=1, progress=None)
+    assert run.mean.shape == (1, 2, 5) and run.zscore.shape == (1, 2, 5)
+    assert abs(run.product[0, 1] / (0.4 * 0.6) - 1) < 0.02  # μ·m from one constant push
+    assert abs(run.product[0, 0] / (0.4 * 0.6) - 1) > 0.02  # the prior row does not know it
+    summary = summarise_method(run, [np.array([0])])
+    assert set(summary["coverage90_per_param"]) >= {"mass", "inertia", "overall"}
