@@ -158,9 +158,14 @@ def test_infer_missing_model(tmp_path, monkeypatch, capsys):
     assert out == ""
 
 
-def test_infer_refuses_a_profile_the_model_never_saw(tmp_path, monkeypatch, capsys):
-    # the shipped model was trained on constant pushes only
-    args = ["infer", "--model", "pretrained", "--object", "catalogue:117", "--pushes", "1"]
+def test_infer_refuses_a_profile_the_model_never_saw(trained, tmp_path, monkeypatch, capsys):
+    from pushtoknow.models.checkpoint import load_checkpoint, save_checkpoint
+
+    # the tiny model, as if it had been trained on constant pushes only
+    model = load_checkpoint(trained[1])
+    model.info["profiles"] = ["constant"]
+    constant_only = save_checkpoint(model, tmp_path / "constant-only")
+    args = ["infer", "--model", constant_only, "--object", "catalogue:117", "--pushes", "1"]
     args += ["--profiles", "constant,release", "--out", tmp_path / "X"]
     code, out, err = run_main(monkeypatch, capsys, *args)
     assert code == 2 and "after push" not in out + err  # refused before any push

@@ -33,7 +33,10 @@ def test_shipped_model_matches_its_recipe():
     )
     assert shipped == as_run
     info = json.loads((d / "training.json").read_text())
-    assert info["objects_from"] == "catalogue-train" and info["data_seed"] == 1
+    assert info["objects_from"] == "catalogue-train+continuous" and info["data_seed"] == 3
+    # the physics-structured models, trained on both speed profiles
+    assert model.models_config.structure == "physics"
+    assert set(model.info["profiles"]) == {"constant", "release"}
     for curve in ("visnet", "supervised", "end_to_end", "calibration"):
         assert (d / f"{curve}.csv").read_text().count("\n") > 1
     # calibrated: R scaled up, finite prior

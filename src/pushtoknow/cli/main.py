@@ -28,7 +28,10 @@ console = Console()
 err_console = Console(stderr=True, soft_wrap=True)
 
 
-PROFILES_HELP = "comma-separated speed profiles the policy may use: constant,release"
+PROFILES_HELP = (
+    "comma-separated speed profiles the policy may use: constant,release "
+    "(default: those the model was trained on)"
+)
 
 
 def _profiles(text: str) -> tuple[str, ...]:
@@ -190,11 +193,11 @@ def evaluate_heldout_cmd(
     workers: int = typer.Option(2, "--workers", min=1),
     out: Path = typer.Option(None, "--out", help="write the metrics JSON here"),
     as_json: bool = typer.Option(False, "--json"),
-    profiles: str = typer.Option("constant", "--profiles", help=PROFILES_HELP),
+    profiles: str = typer.Option(None, "--profiles", help=PROFILES_HELP),
 ):
     """NRMSE after each of K pushes on held-out catalogue objects (the catalogue's test split),
     with the prior-mean predictor and the coverage of the 68% / 90% intervals."""
-    profile_names = _profiles(profiles)
+    profile_names = None if profiles is None else _profiles(profiles)
     import numpy as np
     from rich.progress import Progress
 
@@ -209,6 +212,10 @@ def evaluate_heldout_cmd(
     ids = heldout_object_ids(objects, seed)
     n = len(ids)
     path = resolve_model_path(model)
+    if profile_names is None:
+        from pushtoknow.models.checkpoint import load_checkpoint
+
+        profile_names = load_checkpoint(path).profiles
     with Progress(console=err_console) as bar:
         task = bar.add_task("held-out objects", total=n)
         run = evaluate_heldout(
@@ -576,9 +583,10 @@ def run_inference(
     as_json: bool,
     strip: bool = False,
     sigma_points: int | None = None,
-    profiles: tuple[str, ...] = ("constant",),
+    profiles: tuple[str, ...] | None = None,
 ) -> dict:
-    """Shared by `infer` and `demo`: K pushes on the testbed, tables, plot, JSON."""
+    """Shared by `infer` and `demo`: K pushes on the testbed, tables, plot, JSON. profiles:
+    None for those the model was trained on."""
     from pushtoknow.inference.session import (
         POLICIES,
         InferenceConfig,
@@ -599,7 +607,10 @@ def run_inference(
     show = Console(stderr=True) if as_json else console
     sim_cfg = model.sim_config
     cfg = InferenceConfig(
-        pushes=pushes, policy=policy, num_sigma_points=sigma_points, profiles=profiles
+        pushes=pushes,
+        policy=policy,
+        num_sigma_points=sigma_points,
+        profiles=model.profiles if profiles is None else profiles,
     )
     scorer = (
         active_scorer(policy, sim_cfg, cfg.active_horizon_fraction)
@@ -657,7 +668,7 @@ def infer(
     out: Path = typer.Option(Path("infer-out"), "--out", help="where the plot and JSON go"),
     as_json: bool = typer.Option(False, "--json", help="print the estimates as JSON"),
     sigma_points: int = typer.Option(None, "--sigma-points", help="default: the model's (100)"),
-    profiles: str = typer.Option("constant", "--profiles", help=PROFILES_HELP),
+    profiles: str = typer.Option(None, "--profiles", help=PROFILES_HELP),
 ):
     """Push an object K times on the testbed and estimate its parameters after every push."""
     run_inference(
@@ -669,7 +680,7 @@ def infer(
         out,
         as_json,
         sigma_points=sigma_points,
-        profiles=_profiles(profiles),
+        profiles=None if profiles is None else _profiles(profiles),
     )
 
 

@@ -194,6 +194,8 @@ def render_report(results: dict, command: str, appendices: list[str] = ()) -> st
             f"{info.get('train_objects')} objects × {info.get('pushes_per_object')} pushes "
             f"(data seed {info.get('data_seed')}, {info.get('objects_from')})"
             + (f", {t / 60:.1f} min" if t else "")
+            + f"; {m.get('structure', 'black-box')} model structure, "
+            + f"{' and '.join(info.get('profiles') or ['constant'])} pushes"
             + "; testbed images "
             + ("with" if marker else "without")
             + " the orientation marker (it is evaluated on the same)"

@@ -271,12 +271,6 @@ def _inference_run(
     return run
 
 
-def trained_profiles(info: dict) -> tuple[str, ...]:
-    """The speed profiles a model was trained on (its policies may choose among them);
-    models from before profiles were recorded saw constant pushes only."""
-    return tuple(info.get("profiles") or ("constant",))
-
-
 def _forest_run(forest: ForestBaseline, features: np.ndarray, base: HeldoutRun, prior) -> MethodRun:
     """Forest estimates after k = 0..K pushes (k = 0: the prior mean) on base's pushes."""
     means, stds = [], []
@@ -352,7 +346,7 @@ def run_evaluation(
         footprints = [load_object_spec(o).footprint for o in objects]
         methods: dict[str, MethodRun] = {}
         for i, (model, name, ckpt) in enumerate(zip(models, names, loaded)):
-            profiles = trained_profiles(ckpt.info)
+            profiles = ckpt.profiles
             for policy in cfg.policies if i == 0 else cfg.policies[:1]:
                 method = f"{name}:{policy}"
                 say(f"{set_name}: {method} on {len(objects)} objects ({', '.join(profiles)})")
@@ -412,7 +406,8 @@ def run_evaluation(
     results["config"] = cfg.model_dump(mode="json")
     results["data"] = {"path": str(data), "pushes": int(len(X)), "objects": int(len(first))}
     results["models"] = [
-        {"name": n, "path": str(m), "info": c.info} for n, m, c in zip(names, models, loaded)
+        {"name": n, "path": str(m), "structure": c.models_config.structure, "info": c.info}
+        for n, m, c in zip(names, models, loaded)
     ]
     results["machine"] = machine_description()
     results["figures"] = write_figures(runs_for_figures, models, names, cfg, out / "figures")

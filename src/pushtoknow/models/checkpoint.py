@@ -121,6 +121,12 @@ class TrainedModel:
         return SimConfig() if raw is None else stored_sim_config(raw)
 
     @property
+    def profiles(self) -> tuple[str, ...]:
+        """The speed profiles the model was trained on (its policies choose among them);
+        models from before profiles were recorded saw constant pushes only."""
+        return tuple(self.info.get("profiles") or ("constant",))
+
+    @property
     def vision_only(self) -> bool:
         return self.variant == "v-ddf"
 
