@@ -34,6 +34,17 @@ PROFILES_HELP = (
 )
 
 
+def _save_and_print_json(data: dict, out: Path | None, as_json: bool) -> bool:
+    """Write `data` to `out` (if given) and print it as JSON (if `as_json`); True when printed,
+    so the caller skips its tables."""
+    if out is not None:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_text(json.dumps(data, indent=1))
+    if as_json:
+        print(json.dumps(data))
+    return as_json
+
+
 def _profiles(text: str) -> tuple[str, ...]:
     """'constant,release' → ("constant", "release"), each checked."""
     from pushtoknow.testbed.push import PROFILES
@@ -249,11 +260,7 @@ def evaluate_heldout_cmd(
             ],
         }
     )
-    if out is not None:
-        out.parent.mkdir(parents=True, exist_ok=True)
-        out.write_text(json.dumps(metrics, indent=1))
-    if as_json:
-        print(json.dumps(metrics))
+    if _save_and_print_json(metrics, out, as_json):
         return
     t = Table(title=f"NRMSE on {n} held-out objects ({policy}, seed {seed})")
     for c in ["after push", *PARAM_NAMES, "overall", "μ·m", "coverage90"]:
@@ -940,11 +947,7 @@ def identify_bench_cmd(
         res = run_identification_benchmark(
             objects, pushes, names, seed, cfg, progress=lambda _: bar.advance(task)
         )
-    if out is not None:
-        out.parent.mkdir(parents=True, exist_ok=True)
-        out.write_text(json.dumps(res, indent=1))
-    if as_json:
-        print(json.dumps(res))
+    if _save_and_print_json(res, out, as_json):
         return
     t = Table(
         title=f"identification on {objects} novel objects, pushes: {', '.join(res['profiles'])}"

@@ -26,12 +26,19 @@ kinematics from `PushContext.pad_kinematics`:
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import torch
 
 from pushtoknow.common.params import GRAVITY, PARAM_NAMES, PARAM_RANGES, denormalise_params
 from pushtoknow.filters.interfaces import DynamicsModel, ObservationModel
-from pushtoknow.models.learned import POSE_DIM, SPEED_SCALE, PushContext, ShapeActionEncoding
+from pushtoknow.models.learned import (
+    POSE_DIM,
+    SPEED_SCALE,
+    PushContext,
+    ShapeActionEncoding,
+    sigma_point_features,
+)
 from pushtoknow.models.networks import PhysicsProcessNet, PhysicsTacNet
 
 ACCEL_SCALE = 1.0  # m/s², normalises the pad's acceleration features
@@ -60,35 +67,37 @@ def _in_frame(vec: torch.Tensor, angle: torch.Tensor) -> torch.Tensor:
     return torch.stack([c * vx + s * vy, -s * vx + c * vy], dim=-1)
 
 
+@dataclass(frozen=True)
+class PhysicsFeatures:
+    """Inputs of the physics-structured networks for states (B, S, ·): geom (B, S, GEOM_DIM),
+    dyn (B, S, DYN_DIM), inertial (B, S, INERTIAL_DIM), gate (B, S) ∈ [0, 1), mass (kg) and
+    friction (B, S), accel_push (B, 2) the pad's acceleration at t in the push frame (m/s²)."""
+
+    geom: torch.Tensor
+    dyn: torch.Tensor
+    inertial: torch.Tensor
+    gate: torch.Tensor
+    mass: torch.Tensor
+    friction: torch.Tensor
+    accel_push: torch.Tensor
+
+
 def physics_features(
     states: torch.Tensor, context: PushContext, anchor: torch.Tensor, length_scale: float
-) -> dict[str, torch.Tensor]:
-    """Features of states (B, S, 3 + 5) (pose, normalised φ): "geom" (B, S, GEOM_DIM), "dyn"
-    (B, S, DYN_DIM), "inertial" (B, S, INERTIAL_DIM), "gate" (B, S) ∈ [0, 1), "mass" and
-    "friction" (B, S) in SI, "accel_push" (B, 2) the pad's acceleration at t in the push frame
-    (m/s²). anchor (B, S or 1, 3): the pose each encoding was computed at."""
+) -> PhysicsFeatures:
+    """Features of states (B, S, 3 + 5) (pose, normalised φ); anchor (B, S or 1, 3): the pose
+    each encoding was computed at. The pose, deviation and pad-in-object-frame features are
+    the black-box models' (`sigma_point_features`), without m, μ, I_z and the nominal speed."""
     dt = states.dtype
-    pose0 = context.pose0.to(dt).unsqueeze(1)
     th = states[..., 2]
-    rel = (states[..., :2] - pose0[..., :2]) / length_scale
-    dth = th - pose0[..., 2]
-    dev = states[..., :3] - anchor
-    d = context.contact_xy.to(dt).unsqueeze(1) - states[..., :2]
-    c, s = th.cos(), th.sin()
-    pad = torch.stack([c * d[..., 0] + s * d[..., 1], -s * d[..., 0] + c * d[..., 1]], -1)
-    pd = context.direction.to(dt).unsqueeze(1) - th
-    velocity, accel, accel_prev = (k.to(dt) for k in context.pad_kinematics())
+    base = sigma_point_features(states, context.pose0, anchor, length_scale, context)
+    k = states.shape[-1] - POSE_DIM  # base: pose (4), φ (k), deviation (3), pad (5, speed last)
+    velocity, accel, accel_prev = (v.to(dt) for v in context.pad_kinematics())
     geom = torch.cat(
         [
-            rel,
-            dth.sin().unsqueeze(-1),
-            dth.cos().unsqueeze(-1),
+            base[..., :4],
             states[..., 3 + _CX : 3 + _CY + 1],
-            dev[..., :2] / length_scale,
-            dev[..., 2:],
-            pad / length_scale,
-            pd.sin().unsqueeze(-1),
-            pd.cos().unsqueeze(-1),
+            base[..., 4 + k : 4 + k + 3 + 4],
             _in_frame(velocity, th) / SPEED_SCALE,
             _in_frame(accel, th) / ACCEL_SCALE,
             _in_frame(accel_prev, th) / ACCEL_SCALE,
@@ -116,17 +125,10 @@ def physics_features(
     )
     excess = torch.relu(a_now - STEADY_ACCEL) + torch.relu(a_prev - STEADY_ACCEL)
     gate = (1.0 - torch.exp(-excess / GATE_ACCEL)).expand_as(th)
-    push_dir = context.direction.to(dt)
-    accel_push = _in_frame(accel, push_dir[:, None])[:, 0]
-    return {
-        "geom": geom,
-        "dyn": dyn,
-        "inertial": torch.cat([geom, ratio], dim=-1),
-        "gate": gate,
-        "mass": mass,
-        "friction": friction,
-        "accel_push": accel_push,
-    }
+    accel_push = _in_frame(accel, context.direction.to(dt)[:, None])[:, 0]
+    return PhysicsFeatures(
+        geom, dyn, torch.cat([geom, ratio], dim=-1), gate, mass, friction, accel_push
+    )
 
 
 class PhysicsDynamics(DynamicsModel):
@@ -142,7 +144,7 @@ class PhysicsDynamics(DynamicsModel):
     ) -> tuple[torch.Tensor, torch.Tensor]:
         enc, anchor = self.encoding(states[..., :POSE_DIM], context)
         f = physics_features(states, context, anchor, self.encoding.config.length_scale)
-        return self.process_net(f["geom"], f["dyn"], f["gate"], enc)
+        return self.process_net(f.geom, f.dyn, f.gate, enc)
 
 
 class PhysicsObservation(ObservationModel):
@@ -163,10 +165,10 @@ class PhysicsObservation(ObservationModel):
         """Forces (B, S, 2) in N (world) and contact logits (B, S) for states (B, S, D)."""
         enc, anchor = self.encoding(states[..., :POSE_DIM], context)
         f = physics_features(states, context, anchor, self.encoding.config.length_scale)
-        g, j, logit = self.tac_net(f["geom"], f["inertial"], enc)
-        a = f["accel_push"].unsqueeze(1).unsqueeze(-1)  # (B, 1, 2, 1)
-        push_frame = f["mass"].unsqueeze(-1) * (
-            (f["friction"] * GRAVITY).unsqueeze(-1) * g + (j @ a).squeeze(-1)
+        g, j, logit = self.tac_net(f.geom, f.inertial, enc)
+        a = f.accel_push.unsqueeze(1).unsqueeze(-1)  # (B, 1, 2, 1)
+        push_frame = f.mass.unsqueeze(-1) * (
+            (f.friction * GRAVITY).unsqueeze(-1) * g + (j @ a).squeeze(-1)
         )
         pd = context.direction.to(states.dtype)[:, None]
         c, s = pd.cos(), pd.sin()
