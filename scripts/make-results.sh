@@ -64,7 +64,8 @@ print(heldout_markdown(json.load(open(sys.argv[1])), sys.argv[2]))" "$WORK/heldo
     "$HCMD" > "$WORK/heldout88.md"
 APPEND=(--append "$WORK/heldout88.md" "${APPEND[@]}")
 
-$PTK evaluate --data "$WORK/data" --models pretrained --models "$WORK/vt-addf-black-box" \
+$PTK evaluate --data "$WORK/data" --models pretrained --models "$WORK/vt-addf-physics-network" \
+    --models "$WORK/vt-addf-black-box" \
     --models "$WORK/vt-jdf-black-box" --models "$WORK/v-ddf-black-box" --config configs/evaluate.yaml --out "$WORK/results" "${APPEND[@]}"
 mkdir -p docs/figures
 cp "$WORK/results/RESULTS.md" docs/RESULTS.md

@@ -20,3 +20,9 @@ for v in vt-addf vt-jdf v-ddf; do
             --visnet-from src/pushtoknow/pretrained/vt-addf
     fi
 done
+# the previous shipped model's recipe: quasi-static motion learned by a network
+if [ ! -f "$WORK/vt-addf-physics-network/model.pt" ]; then
+    .venv/bin/pushtoknow train --data "$WORK/data" --out "$WORK/vt-addf-physics-network" \
+        --variant vt-addf --config configs/vt-addf-physics-network.yaml --seed 0 \
+        --visnet-from src/pushtoknow/pretrained/vt-addf
+fi

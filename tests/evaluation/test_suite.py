@@ -57,12 +57,24 @@ def test_method_names_mark_a_structure_other_than_the_first_models():
     from types import SimpleNamespace
 
     from pushtoknow.evaluation.suite import _variant_names
+    from pushtoknow.models.learned import LearnedModelsConfig
 
-    def ckpt(variant, structure):
-        return SimpleNamespace(variant=variant, models_config=SimpleNamespace(structure=structure))
+    def ckpt(variant, structure, quasi_static="network"):
+        cfg = LearnedModelsConfig(structure=structure, quasi_static=quasi_static)
+        return SimpleNamespace(variant=variant, models_config=cfg)
 
-    loaded = [ckpt("vt-addf", "physics"), ckpt("vt-addf", "black-box"), ckpt("v-ddf", "physics")]
-    assert _variant_names(loaded) == ["vt-addf", "vt-addf-black-box", "v-ddf"]
+    loaded = [
+        ckpt("vt-addf", "physics", "limit-surface"),
+        ckpt("vt-addf", "black-box"),
+        ckpt("v-ddf", "physics", "limit-surface"),
+        ckpt("vt-addf", "physics"),
+    ]
+    assert _variant_names(loaded) == [
+        "vt-addf",
+        "vt-addf-black-box",
+        "v-ddf",
+        "vt-addf-physics",
+    ]
     assert _variant_names(loaded[:1] * 2) == ["vt-addf", "vt-addf#1"]
 
 

@@ -17,22 +17,26 @@ F64 = torch.float64
 DT = 0.1
 
 
-def physics_config():
+QUASI_STATIC = ["network", "limit-surface"]
+
+
+def physics_config(quasi_static: str = "network"):
     """tiny_config with the physics structure and hidden layers wide enough that no random
     initialisation leaves a head constant (dead ReLUs)."""
     cfg = tiny_config()
     return cfg.model_copy(
         update={
             "structure": "physics",
+            "quasi_static": quasi_static,
             "process": cfg.process.model_copy(update={"hidden_dims": (32, 32)}),
             "tac": cfg.tac.model_copy(update={"hidden_dims": (32, 32, 32)}),
         }
     )
 
 
-def physics_models(seed: int = 0):
+def physics_models(seed: int = 0, quasi_static: str = "network"):
     torch.manual_seed(seed)
-    models = build_learned_models(physics_config())
+    models = build_learned_models(physics_config(quasi_static))
     for m in models.modules().modules():
         if isinstance(m, torch.nn.Linear):  # tiny nets: make every output depend on its inputs
             torch.nn.init.normal_(m.weight, std=0.8)
@@ -50,15 +54,18 @@ def states_with(mass, friction, inertia, com=(0.005, -0.003), pose=(0.001, 0.0, 
     return torch.cat([torch.tensor([pose], dtype=F64), normalise_params(phi)], -1).unsqueeze(1)
 
 
+PAD_START = -0.0505  # m: the pad's rim 0.5 mm short of square_context's left edge
+
+
 def steady_path(speed=0.02, n=10):
     return torch.stack(
-        [torch.arange(n, dtype=F64) * speed * DT - 0.045, torch.zeros(n, dtype=F64)], -1
+        [torch.arange(n, dtype=F64) * speed * DT + PAD_START, torch.zeros(n, dtype=F64)], -1
     )
 
 
 def accelerating_path(accel=1.0, n=10):
     t = torch.arange(n, dtype=F64) * DT
-    return torch.stack([0.5 * accel * t**2 - 0.045, torch.zeros(n, dtype=F64)], -1)
+    return torch.stack([0.5 * accel * t**2 + PAD_START, torch.zeros(n, dtype=F64)], -1)
 
 
 @given(
@@ -90,18 +97,22 @@ def test_pad_windows_reject_samples_outside_the_path():
         pad_windows(torch.zeros(2, 5, 2), torch.tensor([1, 5]))
 
 
-def test_physics_models_need_the_pad_track():
-    _, models = physics_models()
+@pytest.mark.parametrize("quasi_static", QUASI_STATIC)
+def test_physics_models_need_the_pad_track(quasi_static):
+    _, models = physics_models(quasi_static=quasi_static)
     with pytest.raises(ShapeError, match="with_pad_track"):
         models.dynamics(states_with(0.5, 0.5, 1e-3), square_context(1, F64))
 
 
 @given(k=st.floats(0.3, 3.0))
 @settings(max_examples=15, deadline=None)
-def test_quasi_static_force_depends_on_mass_and_friction_only_through_their_product(k):
+@pytest.mark.parametrize("quasi_static", QUASI_STATIC)
+def test_quasi_static_force_depends_on_mass_and_friction_only_through_their_product(
+    k, quasi_static
+):
     """At constant pad speed, F(m k, μ / k) = F(m, μ) whatever the networks learned; with I_z
     changed too, nothing moves either."""
-    _, models = physics_models()
+    _, models = physics_models(quasi_static=quasi_static)
     ctx = context_with_path(steady_path(), 4)
     f1, _ = models.observation.tactile(states_with(0.5, 0.5, 1e-3), ctx)
     f2, _ = models.observation.tactile(states_with(0.5 * k, 0.5 / k, 1e-3 * k**2), ctx)
@@ -109,10 +120,11 @@ def test_quasi_static_force_depends_on_mass_and_friction_only_through_their_prod
     assert torch.allclose(f1, f2, rtol=1e-9, atol=1e-12)
 
 
-def test_accelerating_pad_adds_a_force_proportional_to_mass():
+@pytest.mark.parametrize("quasi_static", QUASI_STATIC)
+def test_accelerating_pad_adds_a_force_proportional_to_mass(quasi_static):
     """With the pad accelerating, F = m (μ g G + J a): doubling m at fixed μ·m and I_z/m
     changes the force by exactly m J a, so F(2m, μ/2) - F(m, μ) = m J a is linear in a."""
-    _, models = physics_models()
+    _, models = physics_models(quasi_static=quasi_static)
     ctx = context_with_path(accelerating_path(1.0), 3)
     f1, _ = models.observation.tactile(states_with(0.4, 0.6, 0.8e-3), ctx)
     f2, _ = models.observation.tactile(states_with(0.8, 0.3, 1.6e-3), ctx)
@@ -122,8 +134,9 @@ def test_accelerating_pad_adds_a_force_proportional_to_mass():
     assert torch.allclose(f3 - f2, 2 * inertial, rtol=1e-8, atol=1e-10)
 
 
-def test_quasi_static_motion_never_depends_on_mass_friction_or_inertia():
-    _, models = physics_models()
+@pytest.mark.parametrize("quasi_static", QUASI_STATIC)
+def test_quasi_static_motion_never_depends_on_mass_friction_or_inertia(quasi_static):
+    _, models = physics_models(quasi_static=quasi_static)
     ctx = context_with_path(steady_path(), 4)
     d1, q1 = models.dynamics(states_with(0.3, 0.4, 0.6e-3), ctx)
     d2, q2 = models.dynamics(states_with(1.1, 0.7, 1.4e-3), ctx)
@@ -132,8 +145,9 @@ def test_quasi_static_motion_never_depends_on_mass_friction_or_inertia():
     assert not torch.allclose(d1, d3)  # the CoM does enter quasi-static motion
 
 
-def test_dynamic_motion_sees_friction_and_inertia_per_mass_but_not_mass():
-    _, models = physics_models()
+@pytest.mark.parametrize("quasi_static", QUASI_STATIC)
+def test_dynamic_motion_sees_friction_and_inertia_per_mass_but_not_mass(quasi_static):
+    _, models = physics_models(quasi_static=quasi_static)
     ctx = context_with_path(accelerating_path(2.0), 3)
     d1, _ = models.dynamics(states_with(0.4, 0.5, 1e-3), ctx)
     d2, _ = models.dynamics(states_with(0.8, 0.5, 2e-3), ctx)  # same μ, same I_z / m
@@ -142,11 +156,12 @@ def test_dynamic_motion_sees_friction_and_inertia_per_mass_but_not_mass():
     assert not torch.allclose(d1, d3)
 
 
-def test_physics_filter_runs_and_has_exact_gradients():
+@pytest.mark.parametrize("quasi_static", QUASI_STATIC)
+def test_physics_filter_runs_and_has_exact_gradients(quasi_static):
     """A dual filter on the physics models: a step is finite, and the gradient of the
     updated belief with respect to the observation matches finite differences."""
     torch.manual_seed(1)
-    filt = build_filter("dual", models_config=physics_config()).to(F64)
+    filt = build_filter("dual", models_config=physics_config(quasi_static)).to(F64)
     assert isinstance(filt, DualFilter)
     mean, cov = prior(1, F64)
     mean[0, 3:] = 0.1
@@ -166,3 +181,37 @@ def test_physics_structure_refuses_vision_only_models():
     cfg = tiny_config().model_copy(update={"structure": "physics"})
     with pytest.raises(ValueError, match="physics-structured models need tactile"):
         build_learned_models(cfg, vision_only=True)
+
+
+def _silence(mlp: torch.nn.Module) -> None:
+    """Zero a network's last linear layer, so it outputs exactly 0."""
+    last = [m for m in mlp.modules() if isinstance(m, torch.nn.Linear)][-1]
+    torch.nn.init.zeros_(last.weight)
+    torch.nn.init.zeros_(last.bias)
+
+
+def test_limit_surface_motion_is_the_pads_quasi_static_step_plus_the_network():
+    """With the networks silenced, Δψ is the limit surface's step of the pad from sample t-1
+    to t, for the footprint in the context, the sigma point's CoM and ℓ = κ √(J/A)."""
+    from pushtoknow.models.contact import limit_surface_push, radius_of_gyration
+
+    _, models = physics_models(quasi_static="limit-surface")
+    _silence(models.dynamics.process_net.quasi_static)
+    _silence(models.dynamics.process_net.dynamic)
+    ctx = context_with_path(steady_path(), 4)
+    states = states_with(0.5, 0.5, 1e-3, com=(0.01, -0.02))
+    delta, _ = models.dynamics(states, ctx)
+    arm = models.dynamics.limit_surface.log_ratio.exp() * radius_of_gyration(ctx.footprint)
+    expected = limit_surface_push(
+        states[..., :3],
+        torch.tensor([[[0.01, -0.02]]], dtype=F64),
+        ctx.pad_window[:, 1],
+        ctx.pad_window[:, 2],
+        ctx.footprint,
+        0.005,
+        arm,
+        0.001,
+        0.0005,
+    ).twist
+    assert expected[..., 2].abs().item() > 1e-4  # the off-centre CoM turns the square
+    assert torch.allclose(delta, expected, rtol=1e-9, atol=1e-12)

@@ -2,6 +2,7 @@
 an active policy choosing between constant and release pushes."""
 
 import numpy as np
+import pytest
 import torch
 
 from pushtoknow.inference.session import InferenceConfig, active_scorer, infer_object
@@ -13,12 +14,18 @@ from pushtoknow.training.pipeline import TrainConfig, train_model
 from tiny_training import SIM, TINY_TRAIN, tiny_dataset
 
 
-def test_physics_structured_model_trains_reloads_and_estimates(tmp_path_factory, tmp_path):
+@pytest.mark.parametrize("quasi_static", ["network", "limit-surface"])
+def test_physics_structured_model_trains_reloads_and_estimates(
+    tmp_path_factory, tmp_path, quasi_static
+):
     data = tiny_dataset(tmp_path_factory)
-    raw = {**TINY_TRAIN, "models": {**TINY_TRAIN["models"], "structure": "physics"}}
+    models = {**TINY_TRAIN["models"], "structure": "physics", "quasi_static": quasi_static}
+    raw = {**TINY_TRAIN, "models": models}
     trained = train_model(data, tmp_path, TrainConfig.model_validate(raw), seed=0, progress=False)
     model = load_checkpoint(tmp_path)
     assert model.models_config.structure == "physics"
+    assert model.models_config.quasi_static == quasi_static
+    assert (model.models.dynamics.limit_surface is not None) == (quasi_static == "limit-surface")
     assert isinstance(model.models.dynamics, PhysicsDynamics)
     assert isinstance(model.models.observation, PhysicsObservation)
     for a, b in zip(

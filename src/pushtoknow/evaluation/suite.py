@@ -283,12 +283,13 @@ def _forest_run(forest: ForestBaseline, features: np.ndarray, base: HeldoutRun, 
 
 
 def _variant_names(loaded: list) -> list[str]:
-    """Method-name prefixes of the models: the variant, suffixed by the model structure when it
-    differs from the first model's ("vt-addf-black-box"), and by its position when repeated."""
-    first = loaded[0].models_config.structure
+    """Method-name prefixes of the models: the variant, suffixed by the model structure
+    (`LearnedModelsConfig.label`) when it differs from the first model's ("vt-addf-black-box"),
+    and by its position when repeated."""
+    first = loaded[0].models_config.label
     names: list[str] = []
     for m in loaded:
-        structure = m.models_config.structure
+        structure = m.models_config.label
         v = m.variant if structure == first else f"{m.variant}-{structure}"
         names.append(v if v not in names else f"{v}#{len(names)}")
     return names
@@ -406,7 +407,7 @@ def run_evaluation(
     results["config"] = cfg.model_dump(mode="json")
     results["data"] = {"path": str(data), "pushes": int(len(X)), "objects": int(len(first))}
     results["models"] = [
-        {"name": n, "path": str(m), "structure": c.models_config.structure, "info": c.info}
+        {"name": n, "path": str(m), "structure": c.models_config.label, "info": c.info}
         for n, m, c in zip(names, models, loaded)
     ]
     results["machine"] = machine_description()

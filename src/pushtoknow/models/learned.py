@@ -27,7 +27,7 @@ from typing import Literal
 
 import torch
 import torch.nn.functional as F
-from pydantic import model_validator
+from pydantic import Field, model_validator
 from torch import nn
 
 from pushtoknow.common.angles import wrap_angle
@@ -61,6 +61,7 @@ from pushtoknow.models.networks import (
 POSE_DIM = 3
 NUM_POSE_FEATURES = 12  # (x - x0)/L, (y - y0)/L, sin, cos, δx/L, δy/L, δθ, pad (5)
 SPEED_SCALE = 0.1  # m/s, normalises the push speed feature
+PAD_RADIUS = 0.005  # m: the testbed's pad (kept equal to `PadConfig.radius` by a test)
 
 
 @dataclass(frozen=True)
@@ -420,9 +421,15 @@ class LearnedModelsConfig(Config):
     structure: "black-box" (the paper: m, μ, I_z enter ProcessNet and TacNet as inputs like
     any feature) or "physics" (`models.physics`: how they enter force and motion is written
     down; the networks' hidden sizes and output scales are those of `process` and `tac`).
+    quasi_static (physics structure only): "network" (a network learns quasi-static motion
+    and force from geometry, contact and the CoM) or "limit-surface" (`models.contact`: the
+    pad pushes the outline seen in S_0 through the ellipsoidal limit surface about the CoM,
+    and the networks learn what that leaves); pad_radius: the pad's radius (m) for it.
     """
 
     structure: Literal["black-box", "physics"] = "black-box"
+    quasi_static: Literal["network", "limit-surface"] = "network"
+    pad_radius: float = Field(PAD_RADIUS, gt=0)
     param_dim: int = 5
     encoding: EncodingConfig = EncodingConfig()
     encoder: EncoderConfig = EncoderConfig(image_size=32)
@@ -430,6 +437,14 @@ class LearnedModelsConfig(Config):
     tac: TacNetConfig = TacNetConfig()
     obs_noise: ObsNoiseNetConfig = ObsNoiseNetConfig()
     include_contact: bool = False
+
+    @property
+    def label(self) -> str:
+        """The structure as reports name it: "black-box", "physics" or
+        "physics-limit-surface"."""
+        if self.quasi_static == "network":
+            return self.structure
+        return f"{self.structure}-{self.quasi_static}"
 
     @model_validator(mode="after")
     def _consistent(self) -> LearnedModelsConfig:
@@ -440,6 +455,8 @@ class LearnedModelsConfig(Config):
             if net.enc_dim != self.encoder.out_dim:
                 raise ValueError(f"{name}.enc_dim must equal encoder.out_dim")
         crop = self.encoding.crop_size
+        if self.quasi_static != "network" and self.structure != "physics":
+            raise ValueError("quasi_static: limit-surface needs structure: physics")
         if crop is not None and crop != self.encoder.image_size:
             raise ValueError(f"encoder.image_size must equal encoding.crop_size={crop}")
         return self
@@ -500,8 +517,11 @@ def _physics_models(
         )
     process = PhysicsProcessNet(config.process, physics.GEOM_DIM, physics.DYN_DIM)
     tac = PhysicsTacNet(config.tac, physics.GEOM_DIM, physics.INERTIAL_DIM)
+    limit_surface = None
+    if config.quasi_static == "limit-surface":
+        limit_surface = physics.LimitSurface(config.pad_radius)
     return LearnedModels(
-        physics.PhysicsDynamics(encoding, process),
+        physics.PhysicsDynamics(encoding, process, limit_surface),
         physics.PhysicsObservation(encoding, tac),
         LearnedObservationNoise(ObsNoiseNet(config.obs_noise)),
     )

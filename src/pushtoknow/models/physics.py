@@ -10,6 +10,12 @@ Schaal and Bohg, IJRR 2022; README "The models").
   a dynamic network gated by the pad's acceleration (exactly off while |a| ≤ STEADY_ACCEL at
   t and t-1, i.e. in steady pushes) that sees μ and I_z/m only as the
   dimensionless groups of sliding (a/μg, v²/2μgL, log I_z/(m L²)); m alone never enters.
+* With `quasi_static: limit-surface` (`LimitSurface`, `models.contact`), the quasi-static
+  part is written down too: the pad pushes the outline seen in S_0 through the ellipsoidal
+  limit surface about the CoM, which gives the slider's step; the networks then learn only
+  what that model leaves. (Its force, μ m g n / √(1 + ρ²), is left to the friction network:
+  as a fixed term it made μ·m worse on validation objects, through the contact decision on
+  sigma points a millimetre off.)
 
 Features per sigma point (B, S, ·), with L = `EncodingConfig.length_scale` and the pad's
 kinematics from `PushContext.pad_kinematics`:
@@ -29,9 +35,12 @@ import math
 from dataclasses import dataclass
 
 import torch
+from torch import nn
 
+from pushtoknow.common.errors import ShapeError
 from pushtoknow.common.params import GRAVITY, PARAM_NAMES, PARAM_RANGES, denormalise_params
 from pushtoknow.filters.interfaces import DynamicsModel, ObservationModel
+from pushtoknow.models.contact import LimitSurfacePush, limit_surface_push, radius_of_gyration
 from pushtoknow.models.learned import (
     POSE_DIM,
     SPEED_SCALE,
@@ -43,6 +52,9 @@ from pushtoknow.models.networks import PhysicsProcessNet, PhysicsTacNet
 
 ACCEL_SCALE = 1.0  # m/s², normalises the pad's acceleration features
 GATE_ACCEL = 0.5  # m/s²: scale of the gate of the dynamic motion term (below)
+CONTACT_REACH = 1e-3  # m: a pad this close to the outline seen in S_0 counts as touching
+CONTACT_SOFTNESS = 5e-4  # m: width of that decision (a 64 px mask is ~1 mm off)
+MOMENT_ARM_RATIO = 0.9  # initial ℓ / radius of gyration (a disc's ℓ is 0.94 of it)
 STEADY_ACCEL = 0.05  # m/s²: pad accelerations below this are a steady push (tracking noise)
 GEOM_DIM = 19
 DYN_DIM = GEOM_DIM + 5
@@ -131,20 +143,61 @@ def physics_features(
     )
 
 
-class PhysicsDynamics(DynamicsModel):
-    """(Δψ, Q) from `PhysicsProcessNet` on the physics features of each sigma point."""
+class LimitSurface(nn.Module):
+    """Quasi-static pushing of the outline in `context.footprint` (`models.contact`) with a
+    learned moment arm ℓ = κ · radius of gyration; pad_radius (m)."""
 
-    def __init__(self, encoding: ShapeActionEncoding, process_net: PhysicsProcessNet):
+    def __init__(self, pad_radius: float):
+        super().__init__()
+        self.pad_radius = float(pad_radius)
+        self.log_ratio = nn.Parameter(torch.tensor(math.log(MOMENT_ARM_RATIO)))
+
+    def forward(self, states: torch.Tensor, context: PushContext, start: int) -> LimitSurfacePush:
+        """The step of states (B, S, 3 + 5) while the pad moves from context.pad_window's
+        sample `start` to the next (0 ≤ start < 3)."""
+        if context.footprint is None or context.pad_window is None:
+            raise ShapeError("limit-surface models need the footprint and the pad's track")
+        fp = context.footprint.to(states.dtype)
+        com = denormalise_params(states[..., 3:])[..., _CX : _CY + 1]
+        window = context.pad_window.to(states.dtype)
+        arm = self.log_ratio.exp().to(states.dtype) * radius_of_gyration(fp)
+        return limit_surface_push(
+            states[..., :POSE_DIM],
+            com,
+            window[:, start],
+            window[:, start + 1],
+            fp,
+            self.pad_radius,
+            arm,
+            CONTACT_REACH,
+            CONTACT_SOFTNESS,
+        )
+
+
+class PhysicsDynamics(DynamicsModel):
+    """(Δψ, Q) from `PhysicsProcessNet` on the physics features of each sigma point, plus the
+    limit surface's quasi-static step of the pad over the step when there is one."""
+
+    def __init__(
+        self,
+        encoding: ShapeActionEncoding,
+        process_net: PhysicsProcessNet,
+        limit_surface: LimitSurface | None = None,
+    ):
         super().__init__()
         self.encoding = encoding
         self.process_net = process_net
+        self.limit_surface = limit_surface
 
     def forward(
         self, states: torch.Tensor, context: PushContext
     ) -> tuple[torch.Tensor, torch.Tensor]:
         enc, anchor = self.encoding(states[..., :POSE_DIM], context)
         f = physics_features(states, context, anchor, self.encoding.config.length_scale)
-        return self.process_net(f.geom, f.dyn, f.gate, enc)
+        delta, q = self.process_net(f.geom, f.dyn, f.gate, enc)
+        if self.limit_surface is not None:  # the step ends at the window's sample 2
+            delta = delta + self.limit_surface(states, context, 1).twist
+        return delta, q
 
 
 class PhysicsObservation(ObservationModel):
@@ -166,11 +219,11 @@ class PhysicsObservation(ObservationModel):
         enc, anchor = self.encoding(states[..., :POSE_DIM], context)
         f = physics_features(states, context, anchor, self.encoding.config.length_scale)
         g, j, logit = self.tac_net(f.geom, f.inertial, enc)
+        pd = context.direction.to(states.dtype)[:, None]
         a = f.accel_push.unsqueeze(1).unsqueeze(-1)  # (B, 1, 2, 1)
         push_frame = f.mass.unsqueeze(-1) * (
             (f.friction * GRAVITY).unsqueeze(-1) * g + (j @ a).squeeze(-1)
         )
-        pd = context.direction.to(states.dtype)[:, None]
         c, s = pd.cos(), pd.sin()
         along, across = push_frame[..., 0], push_frame[..., 1]
         world = torch.stack([c * along - s * across, s * along + c * across], dim=-1)

@@ -68,13 +68,17 @@ def support_loads(points: np.ndarray, com) -> np.ndarray:
     n = len(pts)
     a = np.vstack([np.ones(n), pts.T / PRESSURE_LENGTH])
     b = np.array([1.0, *np.asarray(com, dtype=np.float64) / PRESSURE_LENGTH])
-    k = 1e4  # weight of the equality rows: moment balance to ~1e-8 m
-    lhs = np.vstack([np.eye(n) * n, k * a])
-    rhs = np.concatenate([np.ones(n), k * b])
-    w = lsq_linear(lhs, rhs, bounds=(0.0, np.inf), method="bvls", tol=1e-14).x
-    w = np.clip(w, 0.0, None)
-    w /= w.sum()
-    err = float(np.linalg.norm(w @ pts - np.asarray(com)))
+    # weight of the equality rows: 1e4 balances the moment to ~1e-8 m; a CoM far off-centre
+    # (nearly all the weight on a few points) can need a stiffer one
+    for k in (1e4, 1e6, 1e8):
+        lhs = np.vstack([np.eye(n) * n, k * a])
+        rhs = np.concatenate([np.ones(n), k * b])
+        w = lsq_linear(lhs, rhs, bounds=(0.0, np.inf), method="bvls", tol=1e-14).x
+        w = np.clip(w, 0.0, None)
+        w /= w.sum()
+        err = float(np.linalg.norm(w @ pts - np.asarray(com)))
+        if err <= 1e-5:
+            break
     if err > 1e-5:
         raise ValueError(
             f"the supports cannot carry a CoM at {list(com)} (m): it lies outside their hull"

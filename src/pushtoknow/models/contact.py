@@ -1,0 +1,147 @@
+"""Quasi-static pushing by a round frictionless pad: the ellipsoidal limit surface (Lynch,
+Maekawa and Tanie, 1992), batched over sigma points and differentiable in the pose and the CoM.
+
+A slider whose support pressure is centred at its CoM c resists a planar wrench (f, τ) about c
+on the ellipsoid |f|²/f_max² + τ²/τ_max² = 1, f_max = μ m g, τ_max = μ m g · ℓ. A frictionless
+pad touching the outline at point q with inward unit normal n pushes with f = f_n n, τ = f_n
+(r × n), r = q − c. The slider's twist is normal to the ellipsoid, (v, ω) ∝ (n, (r × n)/ℓ²),
+and the contact point keeps up with the pad along n. Writing ρ = (r × n)/ℓ, a touching pad
+that advances by δ along n moves the CoM by δ n / (1 + ρ²) and turns the slider
+by δ (r × n) / (ℓ² (1 + ρ²)); the pad force is f_n = μ m g / √(1 + ρ²). m and μ drop out
+of the motion: quasi-static pushing reveals the CoM and ℓ, not the mass.
+
+ℓ is the limit surface's moment arm; for a uniform pressure it is close to the footprint's
+radius of gyration, so ℓ = κ · √(J/A) with J the polar second moment of the footprint about
+its centroid, A its area and κ a learned scalar.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+
+from pushtoknow.filters.shapes import expect_shape
+
+
+@dataclass(frozen=True)
+class PadContact:
+    """The pad against the outline, per sigma point (B, S, ·), object frame (m).
+
+    point: the outline's point nearest the pad's centre; normal: unit, from the pad into the
+    object; penetration: how far the pad's rim reaches past the outline along the normal
+    after the pad's move (m, negative: a gap)."""
+
+    point: torch.Tensor
+    normal: torch.Tensor
+    penetration: torch.Tensor
+
+
+@dataclass(frozen=True)
+class LimitSurfacePush:
+    """One quasi-static step per sigma point: twist (B, S, 3) the slider frame's displacement
+    (Δx, Δy world m, Δθ rad); normal (B, S, 2) the contact normal (world, unit, pad → object);
+    force_factor (B, S) = 1/√(1 + ρ²) (pad force / μ m g while pushing); touching (B, S) in
+    (0, 1); advance (B, S) the pad's move along the normal (m)."""
+
+    twist: torch.Tensor
+    normal: torch.Tensor
+    force_factor: torch.Tensor
+    touching: torch.Tensor
+    advance: torch.Tensor
+
+
+def radius_of_gyration(footprint: torch.Tensor) -> torch.Tensor:
+    """√(J/A) (B,) of polygons footprint (B, V, 2) (m, counter-clockwise, centroid at the
+    origin): J the polar second moment of area about the origin, exact for any simple
+    polygon, convex or not."""
+    a, b = footprint, footprint.roll(-1, dims=1)
+    cross = a[..., 0] * b[..., 1] - b[..., 0] * a[..., 1]
+    area = 0.5 * cross.sum(-1)
+    quad = (a.square() + a * b + b.square()).sum(-1)
+    polar = (cross * quad).sum(-1) / 12.0
+    return (polar / area).clamp_min(1e-12).sqrt()
+
+
+def _rotate(vec: torch.Tensor, angle: torch.Tensor, inverse: bool = False) -> torch.Tensor:
+    """Rotate vectors (B, S, 2) by angle (B, S) (or by −angle when inverse)."""
+    c, s = angle.cos(), angle.sin()
+    if inverse:
+        s = -s
+    x, y = vec[..., 0], vec[..., 1]
+    return torch.stack([c * x - s * y, s * x + c * y], dim=-1)
+
+
+def pad_contact(
+    pad: torch.Tensor, move: torch.Tensor, footprint: torch.Tensor, pad_radius: float
+) -> PadContact:
+    """Contact of a round pad of `pad_radius` (m) centred at pad (B, S, 2) that then moves by
+    move (B, S, 2) with the outline footprint (B, V, 2), all in the object frame (m). The
+    normal is taken where the pad starts, so a long move into the object keeps the face it
+    entered by; a pad centre inside the outline pushes outward through the nearest edge."""
+    expect_shape(footprint, "footprint", [("B", pad.shape[0]), ("V", None), ("2", 2)])
+    a = footprint[:, None]  # (B, 1, V, 2)
+    b = footprint.roll(-1, dims=1)[:, None]
+    ab = b - a
+    p = pad.unsqueeze(-2)  # (B, S, 1, 2)
+    u = (((p - a) * ab).sum(-1) / ab.square().sum(-1).clamp_min(1e-18)).clamp(0.0, 1.0)
+    q = a + u.unsqueeze(-1) * ab  # (B, S, V, 2)
+    dist_all = (p - q).square().sum(-1)
+    idx = dist_all.argmin(-1, keepdim=True)  # (B, S, 1)
+    point = q.gather(-2, idx.unsqueeze(-1).expand(*idx.shape, 2)).squeeze(-2)
+    ay, by, py = a[..., 1], b[..., 1], p[..., 1]
+    straddles = (ay > py) != (by > py)
+    dy = torch.where(straddles, by - ay, torch.ones_like(ay))
+    x_cross = a[..., 0] + (py - ay) * ab[..., 0] / dy
+    inside = ((straddles & (p[..., 0] < x_cross)).sum(-1) % 2) == 1
+    sign = torch.where(inside, -1.0, 1.0).to(pad.dtype)
+    offset = point - pad
+    dist = offset.square().sum(-1).clamp_min(1e-14).sqrt()
+    normal = sign.unsqueeze(-1) * offset / dist.unsqueeze(-1)
+    penetration = pad_radius - sign * dist + (normal * move).sum(-1)
+    return PadContact(point, normal, penetration)
+
+
+def limit_surface_push(
+    pose: torch.Tensor,
+    com: torch.Tensor,
+    pad_from: torch.Tensor,
+    pad_to: torch.Tensor,
+    footprint: torch.Tensor,
+    pad_radius: float,
+    moment_arm: torch.Tensor,
+    reach: float,
+    softness: float,
+) -> LimitSurfacePush:
+    """The quasi-static step of sliders at poses (B, S, 3) (x, y, θ of the footprint's frame,
+    world) with CoMs com (B, S, 2) (object frame, m) while the pad moves from pad_from to
+    pad_to (B, 2) (world, m); footprint (B, V, 2) (object frame, m); moment_arm ℓ (B,) or
+    (B, S) (m).
+
+    The contact point keeps up with the pad's advance along the normal (the pad's velocity
+    form, robust to an outline that is a millimetre off), while the pad touches: weight
+    sigmoid((penetration + reach) / softness) (m), so a pad within `reach` of the outline
+    counts as touching."""
+    b, s = pose.shape[:2]
+    expect_shape(com, "com", [("B", b), ("S", s), ("2", 2)])
+    expect_shape(pad_from, "pad_from", [("B", b), ("2", 2)])
+    expect_shape(pad_to, "pad_to", [("B", b), ("2", 2)])
+    th = pose[..., 2]
+    start = _rotate(pad_from[:, None] - pose[..., :2], th, inverse=True)
+    move = _rotate((pad_to - pad_from)[:, None].expand(b, s, 2), th, inverse=True)
+    contact = pad_contact(start, move, footprint, pad_radius)
+    n = contact.normal
+    r = contact.point - com
+    lever = r[..., 0] * n[..., 1] - r[..., 1] * n[..., 0]  # r × n (m)
+    arm = moment_arm if moment_arm.dim() == 2 else moment_arm[:, None]
+    rho_sq = (lever / arm).square()
+    touching = torch.sigmoid((contact.penetration + reach) / softness)
+    along = (n * move).sum(-1)
+    advance = touching * torch.relu(along) / (1.0 + rho_sq)
+    turn = advance * lever / arm.square()
+    # the frame's origin is at −c from the CoM: it moves by δc + δθ ẑ × (−c)
+    shift = advance.unsqueeze(-1) * n + turn.unsqueeze(-1) * torch.stack(
+        [com[..., 1], -com[..., 0]], dim=-1
+    )
+    twist = torch.cat([_rotate(shift, th), turn.unsqueeze(-1)], dim=-1)
+    return LimitSurfacePush(twist, _rotate(n, th), (1.0 + rho_sq).rsqrt(), touching, along)
