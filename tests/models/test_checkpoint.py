@@ -2,6 +2,8 @@
 
 import pytest
 import torch
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from tiny_models import CAMERA, prior, square_context, tiny_config
 
 from pushtoknow.common.errors import CheckpointError, PushToKnowError
@@ -234,3 +236,37 @@ def test_models_saved_before_testbed_versions_read_back_as_version_1(saved, tmp_
     (tmp_path / "new").mkdir()
     model = load_checkpoint(write_payload(payload, tmp_path / "new"))
     assert model.sim_config.testbed_version == TESTBED_VERSION
+
+
+@given(
+    mean=st.lists(st.floats(-0.5, 0.5), min_size=3, max_size=3),
+    std=st.lists(st.floats(0.1, 1.5), min_size=3, max_size=3),
+    rho=st.floats(-0.8, 0.8),
+    level=st.sampled_from([0.68, 0.9, 0.95]),
+)
+@settings(max_examples=40, deadline=None)
+def test_a_prior_covering_the_range_reaches_both_ends_and_keeps_correlations(mean, std, rho, level):
+    from pushtoknow.models.checkpoint import RANGE_MARGIN
+
+    s = torch.tensor(std, dtype=torch.float64)
+    corr = torch.eye(3, dtype=torch.float64)
+    corr[0, 1] = corr[1, 0] = rho
+    p = ParamPrior(torch.tensor(mean), (corr * s[:, None] * s[None, :]).float())
+    wide = p.covering_range(level)
+    z = torch.distributions.Normal(0.0, 1.0).icdf(torch.tensor(0.5 + 0.5 * level)).item()
+    w = wide.cov.double().diagonal().sqrt()
+    m = wide.mean.double()
+    assert torch.equal(wide.mean, p.mean)
+    assert (m - z * w <= -1 - RANGE_MARGIN + 1e-5).all()
+    assert (m + z * w >= 1 + RANGE_MARGIN - 1e-5).all()
+    assert (w >= s - 1e-6).all()  # never narrower
+    wide_corr = wide.cov.double() / (w[:, None] * w[None, :])
+    assert torch.allclose(wide_corr, corr, atol=1e-5)
+    already = s * z >= 1 + RANGE_MARGIN + torch.tensor(mean, dtype=torch.float64).abs()
+    assert torch.allclose(w[already], s[already], rtol=1e-6)
+
+
+def test_prior_coverage_level_is_checked():
+    p = ParamPrior(torch.zeros(2), torch.eye(2))
+    with pytest.raises(ValueError, match="prior coverage level"):
+        p.covering_range(1.0)

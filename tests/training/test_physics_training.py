@@ -21,6 +21,8 @@ def test_physics_structured_model_trains_reloads_and_estimates(
     data = tiny_dataset(tmp_path_factory)
     models = {**TINY_TRAIN["models"], "structure": "physics", "quasi_static": quasi_static}
     raw = {**TINY_TRAIN, "models": models}
+    if quasi_static == "limit-surface":  # and a prior widened to cover the catalogue ranges
+        raw["prior_coverage"] = 0.9
     trained = train_model(data, tmp_path, TrainConfig.model_validate(raw), seed=0, progress=False)
     model = load_checkpoint(tmp_path)
     assert model.models_config.structure == "physics"
@@ -33,6 +35,9 @@ def test_physics_structured_model_trains_reloads_and_estimates(
     ):
         assert torch.equal(a, b)
     assert set(model.info["profiles"]) == {"constant", "release"}
+    if quasi_static == "limit-surface":
+        low = model.prior.mean - 1.6449 * model.prior.cov.diagonal().sqrt()
+        assert (low <= -1.0).all()
 
     spec = load_object_spec("catalogue:117")
     ex = SimulatedExecutor(spec, SIM, seed=0, recentre=True)

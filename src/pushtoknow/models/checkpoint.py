@@ -39,6 +39,9 @@ Variant = Literal["vt-addf", "vt-jdf", "v-ddf"]
 FILTER_KIND = {"vt-addf": "dual", "vt-jdf": "joint", "v-ddf": "vision_only"}
 
 
+RANGE_MARGIN = 0.05  # normalised: 2.5% of a catalogue range (ParamPrior.covering_range)
+
+
 @dataclass(frozen=True)
 class ParamPrior:
     """Gaussian prior over the normalised parameters: mean (K,), cov (K, K)."""
@@ -56,6 +59,22 @@ class ParamPrior:
         dev = per_object - mean
         cov = dev.T @ dev / max(len(per_object) - 1, 1)
         return cls(mean.float(), symmetrize(cov).float())
+
+    def covering_range(self, level: float) -> ParamPrior:
+        """This prior widened, where it is narrower, until each parameter's central `level`
+        interval spans the whole normalised catalogue range [-1, 1] and RANGE_MARGIN beyond
+        (so values at the range's ends are inside, not on the edge; correlations kept): the
+        moments of a bounded set of training objects under-cover its ends (a Gaussian fitted
+        to the four catalogue values of I_z leaves the lowest and highest outside its 90%
+        interval)."""
+        if not 0.0 < level < 1.0:
+            raise ValueError(f"prior coverage level must lie in (0, 1), got {level}")
+        z = torch.distributions.Normal(0.0, 1.0).icdf(torch.tensor(0.5 + 0.5 * level)).double()
+        std = self.cov.double().diagonal().sqrt()
+        need = (1.0 + RANGE_MARGIN + self.mean.double().abs()) / z
+        factor = torch.maximum(need / std, torch.ones_like(std))
+        cov = self.cov.double() * factor[:, None] * factor[None, :]
+        return ParamPrior(self.mean.clone(), symmetrize(cov).float())
 
     def to_dict(self) -> dict:
         return {"mean": self.mean.tolist(), "cov": self.cov.tolist()}

@@ -68,6 +68,14 @@ class TrainConfig(Config):
     variant: Variant = "vt-addf"
     val_fraction: float = Field(0.1, gt=0, lt=1)
     max_objects: int | None = Field(None, ge=2)
+    prior_coverage: float | None = Field(
+        None,
+        gt=0,
+        lt=1,
+        description="widen the parameter prior (the training objects' moments) until its "
+        "central interval of this level spans each catalogue range; None: the moments as "
+        "they are",
+    )
     visnet: VisNetTrainConfig = VisNetTrainConfig(epochs=10, frame_every=10)
     models: LearnedModelsConfig = LearnedModelsConfig()
     filter: FilterConfig = FilterConfig()
@@ -212,6 +220,8 @@ def train_model(
         )
         train, val = split_by_object(pt, cfg.val_fraction, seed)
         prior = ParamPrior.from_params(train.params_norm, train.object_index)
+        if cfg.prior_coverage is not None:
+            prior = prior.covering_range(cfg.prior_coverage)
         err = (pt.vision_pose - pt.pose)[..., :2].norm(dim=-1)
         vision_error = {"vision_xy_rmse_mm": float(err.square().mean().sqrt() * 1e3)}
         timings["vision_poses_s"] = time.perf_counter() - t0
