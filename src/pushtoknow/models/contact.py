@@ -42,13 +42,12 @@ class LimitSurfacePush:
     """One quasi-static step per sigma point: twist (B, S, 3) the slider frame's displacement
     (Δx, Δy world m, Δθ rad); normal (B, S, 2) the contact normal (world, unit, pad → object);
     force_factor (B, S) = 1/√(1 + ρ²) (pad force / μ m g while pushing); touching (B, S) in
-    (0, 1); advance (B, S) the pad's move along the normal (m)."""
+    (0, 1)."""
 
     twist: torch.Tensor
     normal: torch.Tensor
     force_factor: torch.Tensor
     touching: torch.Tensor
-    advance: torch.Tensor
 
 
 def radius_of_gyration(footprint: torch.Tensor) -> torch.Tensor:
@@ -136,12 +135,11 @@ def limit_surface_push(
     arm = moment_arm if moment_arm.dim() == 2 else moment_arm[:, None]
     rho_sq = (lever / arm).square()
     touching = torch.sigmoid((contact.penetration + reach) / softness)
-    along = (n * move).sum(-1)
-    advance = touching * torch.relu(along) / (1.0 + rho_sq)
+    advance = touching * torch.relu((n * move).sum(-1)) / (1.0 + rho_sq)
     turn = advance * lever / arm.square()
     # the frame's origin is at −c from the CoM: it moves by δc + δθ ẑ × (−c)
     shift = advance.unsqueeze(-1) * n + turn.unsqueeze(-1) * torch.stack(
         [com[..., 1], -com[..., 0]], dim=-1
     )
     twist = torch.cat([_rotate(shift, th), turn.unsqueeze(-1)], dim=-1)
-    return LimitSurfacePush(twist, _rotate(n, th), (1.0 + rho_sq).rsqrt(), touching, along)
+    return LimitSurfacePush(twist, _rotate(n, th), (1.0 + rho_sq).rsqrt(), touching)

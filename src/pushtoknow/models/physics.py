@@ -83,7 +83,8 @@ def _in_frame(vec: torch.Tensor, angle: torch.Tensor) -> torch.Tensor:
 class PhysicsFeatures:
     """Inputs of the physics-structured networks for states (B, S, ·): geom (B, S, GEOM_DIM),
     dyn (B, S, DYN_DIM), inertial (B, S, INERTIAL_DIM), gate (B, S) ∈ [0, 1), mass (kg) and
-    friction (B, S), accel_push (B, 2) the pad's acceleration at t in the push frame (m/s²)."""
+    friction (B, S), com (B, S, 2) (object frame, m), accel_push (B, 2) the pad's
+    acceleration at t in the push frame (m/s²)."""
 
     geom: torch.Tensor
     dyn: torch.Tensor
@@ -91,6 +92,7 @@ class PhysicsFeatures:
     gate: torch.Tensor
     mass: torch.Tensor
     friction: torch.Tensor
+    com: torch.Tensor
     accel_push: torch.Tensor
 
 
@@ -139,7 +141,14 @@ def physics_features(
     gate = (1.0 - torch.exp(-excess / GATE_ACCEL)).expand_as(th)
     accel_push = _in_frame(accel, context.direction.to(dt)[:, None])[:, 0]
     return PhysicsFeatures(
-        geom, dyn, torch.cat([geom, ratio], dim=-1), gate, mass, friction, accel_push
+        geom,
+        dyn,
+        torch.cat([geom, ratio], dim=-1),
+        gate,
+        mass,
+        friction,
+        si[..., _CX : _CY + 1],
+        accel_push,
     )
 
 
@@ -152,20 +161,21 @@ class LimitSurface(nn.Module):
         self.pad_radius = float(pad_radius)
         self.log_ratio = nn.Parameter(torch.tensor(math.log(MOMENT_ARM_RATIO)))
 
-    def forward(self, states: torch.Tensor, context: PushContext, start: int) -> LimitSurfacePush:
-        """The step of states (B, S, 3 + 5) while the pad moves from context.pad_window's
-        sample `start` to the next (0 ≤ start < 3)."""
+    def forward(
+        self, pose: torch.Tensor, com: torch.Tensor, context: PushContext
+    ) -> LimitSurfacePush:
+        """The step that ends at sample t (the pad from the window's sample t-1 to t) of
+        sliders at poses (B, S, 3) with CoMs com (B, S, 2) (object frame, m)."""
         if context.footprint is None or context.pad_window is None:
             raise ShapeError("limit-surface models need the footprint and the pad's track")
-        fp = context.footprint.to(states.dtype)
-        com = denormalise_params(states[..., 3:])[..., _CX : _CY + 1]
-        window = context.pad_window.to(states.dtype)
-        arm = self.log_ratio.exp().to(states.dtype) * radius_of_gyration(fp)
+        fp = context.footprint.to(pose.dtype)
+        window = context.pad_window.to(pose.dtype)
+        arm = self.log_ratio.exp().to(pose.dtype) * radius_of_gyration(fp)
         return limit_surface_push(
-            states[..., :POSE_DIM],
+            pose,
             com,
-            window[:, start],
-            window[:, start + 1],
+            window[:, 1],
+            window[:, 2],
             fp,
             self.pad_radius,
             arm,
@@ -195,8 +205,8 @@ class PhysicsDynamics(DynamicsModel):
         enc, anchor = self.encoding(states[..., :POSE_DIM], context)
         f = physics_features(states, context, anchor, self.encoding.config.length_scale)
         delta, q = self.process_net(f.geom, f.dyn, f.gate, enc)
-        if self.limit_surface is not None:  # the step ends at the window's sample 2
-            delta = delta + self.limit_surface(states, context, 1).twist
+        if self.limit_surface is not None:
+            delta = delta + self.limit_surface(states[..., :POSE_DIM], f.com, context).twist
         return delta, q
 
 
