@@ -24,12 +24,14 @@ if [ -d "$SAMPLE" ]; then
     $PTK estimate-real "$WORK/real/rect1-as20" --model pretrained --forest-data "$WORK/data" \
         --seed 0 --out "$WORK/real/report.json" --markdown "$WORK/real/report.md"
     {
-        echo "## Real pushes: MIT Push sample (issue 6)"
+        echo "## Real pushes: MIT Push sample"
         echo
         echo "The three rect1-on-plywood sample files (100 mm/s), converted with synthetic RGB-D"
         echo "and time-rescaled to the model's 20 mm/s (\`import-mit --as-speed 20\`; exact only"
         echo "for quasi-static motion). Filter: the shipped model, posterior carried push to push."
-        echo "Forest: fitted on the shipped model's simulated training pushes. Truth: MIT mass and"
+        echo "Forest: fitted on the shipped model's simulated training pushes. Identify: the"
+        echo "physics-based fit (\`pushtoknow identify\`), replaying the recorded pusher tracks in"
+        echo "MuJoCo on the recorded 50 Hz clock, after 1, 2 and 3 pushes. Truth: MIT mass and"
         echo "I_z, CoM at the centroid, friction = mean‖F‖/(m·g) over the contact phase of the pure"
         echo "translations (|Δθ| < 2°). Command:"
         echo

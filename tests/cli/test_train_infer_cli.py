@@ -146,6 +146,11 @@ def test_infer_json(trained, tmp_path):
     assert json.loads((out / "estimates.json").read_text()) == report
     assert (out / "estimates.png").stat().st_size > 1000
     assert "after push 1" in result.stderr
+    # the executed pushes are kept for `identify --pushes RUN`
+    from pushtoknow.identification.recordings import load_recorded_objects
+
+    (kept,) = load_recorded_objects(out)
+    assert len(kept.records) == 1 and kept.truth.tolist() == truth.as_array().tolist()
 
 
 def test_infer_missing_model(tmp_path, monkeypatch, capsys):

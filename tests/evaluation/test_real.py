@@ -65,7 +65,9 @@ def forest_dir(tmp_path_factory) -> Path:
 
 @pytest.fixture(scope="module")
 def report(real_dir, run_dir, forest_dir) -> dict:
-    return estimate_real_object(real_dir, run_dir, forest_dir, seed=0, forest_trees=TREES)
+    return estimate_real_object(
+        real_dir, run_dir, forest_dir, seed=0, forest_trees=TREES, identify=False
+    )
 
 
 def _record(force: float, rotation: float, contact=(2, 6), dropout: int | None = None):
@@ -222,12 +224,16 @@ def test_filter_runs_the_pushes_in_order_carrying_the_posterior(report, real_dir
 
 
 def test_deterministic_given_seed(report, real_dir, run_dir, forest_dir):
-    again = estimate_real_object(real_dir, run_dir, forest_dir, seed=0, forest_trees=TREES)
+    again = estimate_real_object(
+        real_dir, run_dir, forest_dir, seed=0, forest_trees=TREES, identify=False
+    )
     assert again["filter"] == report["filter"] and again["forest"] == report["forest"]
 
 
 def test_rescaled_pushes_are_labelled_at_training_speed(real_dir_rescaled, run_dir, forest_dir):
-    r = estimate_real_object(real_dir_rescaled, run_dir, forest_dir, seed=0, forest_trees=TREES)
+    r = estimate_real_object(
+        real_dir_rescaled, run_dir, forest_dir, seed=0, forest_trees=TREES, identify=False
+    )
     for p in r["pushes"]:
         assert p["speed_m_per_s"] == pytest.approx(0.02) and p["time_scale"] == pytest.approx(5)
         assert p["file_speed_m_per_s"] == 0.1 and p["samples"] > 40
@@ -243,7 +249,7 @@ def test_raw_files_are_rescaled_to_the_training_speed_by_default(
 ):
     """Raw MIT files: imported on the fly, time-rescaled to the model's 20 mm/s unless told not
     to; the same estimates as from the equivalent import."""
-    kw = {"seed": 0, "forest_trees": TREES, "obj": "plywood:rect1"}
+    kw = {"seed": 0, "forest_trees": TREES, "obj": "plywood:rect1", "identify": False}
     r = estimate_real_object(sample_dir, run_dir, forest_dir, import_dir=tmp_path / "imp", **kw)
     assert r["conversion"]["imported_here"] and r["conversion"]["as_speed_m_per_s"] == 0.02
     assert (tmp_path / "imp" / "import.json").exists()
@@ -255,7 +261,9 @@ def test_raw_files_are_rescaled_to_the_training_speed_by_default(
     assert raw["conversion"]["as_speed_m_per_s"] is None and raw["conversion"]["dir"] is None
     assert [p["speed_m_per_s"] for p in raw["pushes"]] == [0.1] * 3
     with pytest.raises(DatasetError, match="no MIT Push files of 'hex'"):
-        estimate_real_object(sample_dir, run_dir, forest_dir, obj="hex", forest_trees=TREES)
+        estimate_real_object(
+            sample_dir, run_dir, forest_dir, obj="hex", forest_trees=TREES, identify=False
+        )
 
 
 # ------------------------------------------------------------------------------------------
@@ -265,7 +273,7 @@ def test_wrong_directory_or_object_gives_clear_errors(real_dir, forest_dir, tmp_
     with pytest.raises(DatasetError, match="import-mit"):
         load_real_object(forest_dir)  # a simulated dataset, not an import
     with pytest.raises(DatasetError, match="import-mit"):
-        estimate_real_object(forest_dir, run_dir, forest_dir, forest_trees=TREES)
+        estimate_real_object(forest_dir, run_dir, forest_dir, forest_trees=TREES, identify=False)
     with pytest.raises(DatasetError, match="no such directory"):
         load_real_object(tmp_path / "missing")
     with pytest.raises(DatasetError, match=r"'rect2'.*plywood:rect1"):
@@ -275,7 +283,9 @@ def test_wrong_directory_or_object_gives_clear_errors(real_dir, forest_dir, tmp_
     assert load_real_object(real_dir, "plywood:rect1")["shape"] == "rect1"
     (tmp_path / "empty").mkdir()
     with pytest.raises(DatasetError, match="no shard"):
-        estimate_real_object(real_dir, run_dir, tmp_path / "empty", forest_trees=TREES)
+        estimate_real_object(
+            real_dir, run_dir, tmp_path / "empty", forest_trees=TREES, identify=False
+        )
 
 
 # ------------------------------------------------------------------------------------------
@@ -289,7 +299,7 @@ def test_cli_json_out_and_markdown(real_dir, run_dir, forest_dir, tmp_path, repo
     out, md = tmp_path / "r" / "report.json", tmp_path / "r" / "table.md"
     res = _invoke(
         real_dir, "--model", run_dir, "--forest-data", forest_dir, "--seed", 0,
-        "--trees", TREES, "--json", "--out", out, "--markdown", md,
+        "--trees", TREES, "--json", "--out", out, "--markdown", md, "--no-identify",
     )  # fmt: skip
     assert res.exit_code == 0, (res.output, res.exception)
     got = json.loads(res.stdout)
@@ -298,7 +308,10 @@ def test_cli_json_out_and_markdown(real_dir, run_dir, forest_dir, tmp_path, repo
     assert json.loads(out.read_text())["errors"] == got["errors"]
     assert "| friction |" in md.read_text()
     # Without --json: the tables.
-    res = _invoke(real_dir, "--model", run_dir, "--forest-data", forest_dir, "--trees", TREES)
+    res = _invoke(
+        real_dir, "--model", run_dir, "--forest-data", forest_dir, "--trees", TREES,
+        "--no-identify",
+    )  # fmt: skip
     assert res.exit_code == 0, (res.output, res.exception)
     for text in ("mass (kg)", "inertia", "0.837", "overall", "prior mean", "speed mismatch"):
         assert text in res.stdout, text
@@ -309,3 +322,48 @@ def test_cli_wrong_object_exits_2(real_dir, run_dir, forest_dir):
     assert res.exit_code == 2
     assert "error" in res.output and "plywood:rect1" in res.output
     assert res.exception is None or isinstance(res.exception, SystemExit)
+
+
+# ------------------------------------------------------------------------------------------
+# physics-based identification row
+# ------------------------------------------------------------------------------------------
+LIGHT_IDENTIFY = {"workers": 1, "screen_starts": 1, "refine_starts": 1, "max_iterations": 3}
+
+
+def test_identify_row_replays_the_recorded_clock_and_reports_every_push(
+    real_dir_rescaled, run_dir, forest_dir
+):
+    """On the pushes time-rescaled for the filter (10 Hz, scale 5), the identification replays
+    the recorded 50 Hz clock along the recorded pusher tracks, estimates the noise from the
+    misfit (real data have none), and reports after 1…3 pushes, with errors and μ·m beside
+    the filter's; intervals contain their means, and the tables gain its column and rows."""
+    from pushtoknow.identification.config import IdentifyConfig
+
+    r = estimate_real_object(
+        real_dir_rescaled, run_dir, forest_dir, seed=0, forest_trees=TREES,
+        identify_config=IdentifyConfig(**LIGHT_IDENTIFY),
+    )  # fmt: skip
+    ident = r["identify"]
+    assert ident["rate_hz"] == pytest.approx(50.0)
+    assert len(ident["per_push"]) == 3 and len(r["errors"]["identify"]) == 3
+    assert ident["noise_std"]["estimated_from_misfit"] is True
+    assert ident["noise_std"]["force_N"] > 0.05  # a real misfit, not the 0 N stored
+    for p in ident["per_push"]:
+        for n in PARAM_NAMES:
+            lo, hi = p[n]["interval"]
+            assert lo <= p[n]["mean"] <= hi and p[n]["std"] > 0
+        assert p["mass"]["mean"] > 0 and p["friction"]["mean"] > 0 and p["inertia"]["mean"] > 0
+    # μ·m is what quasi-static pushes reveal: within 40% of the measured reference
+    assert r["mu_m"]["identify"][-1]["mean"] == pytest.approx(r["mu_m"]["truth"], rel=0.4)
+    assert "probe radius 4.75 mm" in ident["model"]
+    md = markdown_table(r, "rect1")
+    assert "identify (3 pushes)" in md and md.count("| identify, push") == 3
+
+
+def test_identify_refuses_pushes_on_different_clocks(real_dir_rescaled, tmp_path):
+    from pushtoknow.evaluation.real import identify_real, load_real_object
+
+    real = load_real_object(real_dir_rescaled)
+    real["attrs"][1] = {**real["attrs"][1], "mit_time_scale": 2.0}
+    with pytest.raises(DatasetError, match="different time scales"):
+        identify_real(real_dir_rescaled, real, seed=0)

@@ -4,6 +4,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from pushtoknow.common.params import ObjectParams, normalise_params
 from pushtoknow.identification.config import IdentifyConfig
@@ -98,6 +100,54 @@ def test_laplace_posterior_keeps_flat_directions_at_the_prior():
     step = np.array([0.0, 0.1, 0.0, 0.0, 0.0])
     with_step, *_ = laplace_posterior(h, step, prior, 0.1)
     assert with_step[1, 1] == pytest.approx(cov[1, 1] + 0.01)
+
+
+def test_information_scale_per_coordinate_widens_only_its_own():
+    from pushtoknow.identification.fit import laplace_posterior
+
+    prior = np.diag([0.3, 0.3, 0.33, 0.33, 0.31])
+    h = np.diag([1e6, 50.0, 1e4, 1e4, 40.0])
+    cov, *_ = laplace_posterior(h, np.zeros(5), prior, 0.1)
+    per, *_ = laplace_posterior(h, np.zeros(5), prior, 0.1, (1.0, 1.0, 0.25, 0.25, 1.0))
+    np.testing.assert_allclose(np.diagonal(per)[[0, 1, 4]], np.diagonal(cov)[[0, 1, 4]])
+    assert per[2, 2] == pytest.approx(1 / (0.25e4 + 1 / 0.33))
+
+
+@given(
+    rho=st.floats(0.0, 0.95),
+    sigma=st.floats(0.1, 10.0),
+    seed=st.integers(0, 2**16),
+)
+@settings(max_examples=20, deadline=None)
+def test_misfit_noise_counts_correlated_samples_by_their_effective_number(rho, sigma, seed):
+    """AR(1) misfits of std σ and lag-1 correlation ρ in each of three pushes: the scale of
+    every channel group is σ √((1 + ρ) / (1 − ρ)) to within sampling error (ρ estimated from
+    3 × 400 samples), i.e. the variance of the misfit's mean, not of one sample."""
+    from pushtoknow.identification.fit import misfit_noise_scale
+
+    rng = np.random.default_rng(seed)
+    lengths = [400, 400, 400]
+    pushes = []
+    for n in lengths:
+        x = np.zeros((n, 5))
+        x[0] = rng.normal(0, sigma, 5)
+        for t in range(1, n):
+            x[t] = rho * x[t - 1] + rng.normal(0, sigma * np.sqrt(1 - rho**2), 5)
+        pushes.append(x)
+    scale = misfit_noise_scale(np.concatenate(pushes), lengths)
+    want = sigma * np.sqrt((1 + rho) / (1 - rho))
+    np.testing.assert_allclose(scale, want, rtol=0.35)
+    assert scale[0] == scale[1] and scale[2] == scale[3]  # one level per channel group
+
+
+def test_an_uncorrelated_misfit_scales_by_its_rms():
+    """A misfit without positive correlation (alternating, as stick-slip gives) scales by its
+    RMS: each sample counts."""
+    from pushtoknow.identification.fit import misfit_noise_scale
+
+    r = np.tile(np.array([[1.0, -1.0, 2.0, -2.0, 3.0], [-1.0, 1.0, -2.0, 2.0, -3.0]]), (50, 1))
+    scale = misfit_noise_scale(r, [50, 50])
+    np.testing.assert_allclose(scale, [1, 1, 2, 2, 3])
 
 
 @pytest.mark.slow

@@ -1,9 +1,11 @@
 """Reading pushes to identify from a dataset, and the footprint choices."""
 
+import dataclasses
+
 import h5py
 import numpy as np
 import pytest
-from identify_data import SPEC, write_tiny_dataset
+from identify_data import SHORT, SPEC, write_tiny_dataset
 
 from pushtoknow.common.errors import DatasetError, IdentificationError
 from pushtoknow.datasets.shards import shard_path
@@ -72,12 +74,42 @@ def test_given_shapes_parse(tmp_path):
     assert parse_shape(str(f))["width"] == 0.1
 
 
-def test_a_pad_track_off_its_profile_is_refused(tiny):
+def test_a_pad_track_off_its_profile_is_replayed_along_the_recording(tiny):
+    """A push that follows its speed profile is replayed with it; one whose pad departs from
+    it (a real pusher) is replayed along its recorded track; pushes may differ in length;
+    a non-finite track is refused, naming the push and the track."""
     (obj,) = load_recorded_objects(tiny)
     rec = obj.records[0]
-    rec.pusher[5:] += 0.01
-    with pytest.raises(IdentificationError, match="departs"):
-        tracks_from_records([rec], obj.sim_config)
+    assert tracks_from_records([rec], obj.sim_config)[0].pad is None
+    bent = dataclasses.replace(rec, pusher=rec.pusher.copy())
+    bent.pusher[5:] += 0.01
+    short = dataclasses.replace(
+        rec, time=rec.time[:12], pose=rec.pose[:12], tactile=rec.tactile[:12],
+        pusher=rec.pusher[:12],
+    )  # fmt: skip
+    tracks = tracks_from_records([bent, short], obj.sim_config)
+    np.testing.assert_array_equal(tracks[0].pad, bent.pusher)
+    assert tracks[1].pad is None and len(tracks[1].pose) == 12
+    broken = dataclasses.replace(rec, pose=rec.pose.copy())
+    broken.pose[3, 0] = np.nan
+    with pytest.raises(IdentificationError, match="push 1: non-finite values in its pose"):
+        tracks_from_records([rec, broken], obj.sim_config)
+
+
+def test_an_inference_run_keeps_its_pushes_for_identify(tmp_path, tiny):
+    """`write_run_pushes` (what `infer --out RUN` calls) keeps the executed pushes in
+    RUN/pushes, and `--pushes RUN` reads them back with the object's spec."""
+    from pushtoknow.datasets.shards import read_shard, write_run_pushes
+
+    (episode,) = read_shard(next(iter(sorted(tiny.glob("shard-*.h5")))))
+    run = tmp_path / "run"
+    write_run_pushes(run, episode.spec, episode.records, SHORT.model_dump_json())
+    (obj,) = load_recorded_objects(run)
+    assert obj.name == "tiny" and len(obj.records) == len(episode.records)
+    np.testing.assert_array_equal(obj.records[0].pusher, episode.records[0].pusher)
+    assert obj.sim_config == SHORT
+    with pytest.raises(IdentificationError, match="nor an inference run"):
+        load_recorded_objects(tmp_path)
 
 
 def test_identify_with_the_footprint_from_the_mask(tiny):

@@ -594,6 +594,7 @@ def run_inference(
 ) -> dict:
     """Shared by `infer` and `demo`: K pushes on the testbed, tables, plot, JSON. profiles:
     None for those the model was trained on."""
+    from pushtoknow.datasets.shards import write_run_pushes
     from pushtoknow.inference.session import (
         POLICIES,
         InferenceConfig,
@@ -652,7 +653,9 @@ def run_inference(
         out.mkdir(parents=True, exist_ok=True)
         plot_estimates(result, out / "estimates.png", title=f"{spec.name} · {model.variant}")
         (out / "estimates.json").write_text(json.dumps(report, indent=1))
+        pushes_file = write_run_pushes(out, spec, result.records, sim_cfg.model_dump_json())
         show.print(f"estimates plot → {out / 'estimates.png'}")
+        show.print(f"executed pushes → {pushes_file} (`pushtoknow identify --pushes {out}`)")
         if strip:
             save_push_strip(
                 result.records[0], model.camera, out / "push-1.png", title=f"{spec.name}, push 1"
@@ -850,7 +853,10 @@ def _identification_table(name: str, res, truth) -> Table:
 @app.command("identify")
 def identify_cmd(
     pushes: Path = typer.Option(
-        ..., "--pushes", help="dataset directory (shard-*.h5) or one shard file"
+        ...,
+        "--pushes",
+        help="dataset directory (shard-*.h5), one shard file, or an `infer`/`demo` --out "
+        "RUN (the pushes it executed)",
     ),
     shape: str = typer.Option("dataset", "--shape", help=IDENTIFY_SHAPE_HELP),
     object_index: int = typer.Option(

@@ -44,13 +44,19 @@ def estimate_real(
     import_dir: Path | None = typer.Option(
         None, "--import-dir", help="raw MIT files: keep the converted dataset here"
     ),
+    identify: bool = typer.Option(
+        True,
+        "--identify/--no-identify",
+        help="also identify the parameters by replaying the recorded pusher tracks in MuJoCo "
+        "(after 1…K pushes; ~10 s per fit of 3 short pushes on 2 cores)",
+    ),
     out: Path | None = typer.Option(None, "--out", help="write the report JSON here"),
     markdown: Path | None = typer.Option(None, "--markdown", help="write the tables here (.md)"),
     as_json: bool = typer.Option(False, "--json", help="print the report as JSON"),
 ):
     """Estimate a real object's parameters from its recorded pushes (filter after every push,
-    random forest, prior mean) and compare with its known mass, I_z, CoM and a friction
-    measured on its pure translations. Raw MIT Push files are converted first, time-rescaled
+    random forest, physics-based identification, prior mean) and compare with its known mass,
+    I_z, CoM and a friction measured on its pure translations. Raw MIT Push files are converted first, time-rescaled
     to the model's training speed unless --no-rescale."""
     from pushtoknow.evaluation.real import error_rows, estimate_real_object, markdown_table
     from pushtoknow.pretrained import resolve_model_path
@@ -66,6 +72,7 @@ def estimate_real(
             forest_trees=trees,
             rescale=rescale,
             import_dir=import_dir,
+            identify=identify,
         )
     except PushToKnowError as e:
         err_console.print(f"[bold red]error:[/] {e}")
@@ -112,6 +119,15 @@ def _print_report(report: dict, error_rows, model_ref: str) -> None:
             f"{p['time_scale']:g}), moved {p['displacement_m'] * 100:.1f} cm, turned "
             f"{p['rotation_deg']:+.1f}°" + (" (pure translation)" if p["pure_translation"] else "")
         )
+    ident = report.get("identify")
+    if ident is not None:
+        last = ident["per_push"][-1]
+        console.print(
+            f"identify: {ident['model']}; replayed at {ident['rate_hz']:g} Hz; not identified "
+            f"(prior width kept): {', '.join(last['unidentified']) or 'none'}"
+        )
+        for n in ident["notes"]:
+            console.print(f"[dim]identify note:[/] {n}")
     for n in report["notes"]:
         console.print(f"[dim]note:[/] {n}")
     console.print(f"[dim]{report['seconds']:.1f} s[/]")

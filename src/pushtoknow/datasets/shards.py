@@ -32,6 +32,7 @@ from pushtoknow.testbed.sim import PushRecord
 
 SCHEMA_VERSION = 1
 SHARD_GLOB = "shard-*.h5"
+RUN_PUSHES = "pushes"  # subfolder of an `infer` / `demo` output holding the executed pushes
 COMPRESSION = {"compression": "gzip", "compression_opts": 4, "shuffle": True}
 
 
@@ -167,6 +168,25 @@ def read_shard(path: Path, images: bool = True) -> list[ObjectEpisode]:
             recs = [read_push(path, g["pushes"][k], images) for k in sorted(g["pushes"], key=int)]
             out.append(ObjectEpisode(spec, int(g.attrs["object_index"]), recs))
         return out
+
+
+def write_run_pushes(
+    run_dir: Path, spec: ObjectSpec, records: list[PushRecord], sim_config_json: str
+) -> Path:
+    """Keep the pushes an inference run executed as a one-object dataset in
+    `run_dir`/RUN_PUSHES (shard 0, the object's true spec), so that other estimators
+    (`pushtoknow identify --pushes RUN`) can use the very same pushes. Returns the shard."""
+    folder = Path(run_dir) / RUN_PUSHES
+    folder.mkdir(parents=True, exist_ok=True)
+    path = shard_path(folder, 0)
+    write_shard(
+        path,
+        [ObjectEpisode(spec, 0, list(records))],
+        fingerprint="inference run",
+        shard_index=0,
+        sim_config_json=sim_config_json,
+    )
+    return path
 
 
 def list_shards(root: Path) -> list[Path]:

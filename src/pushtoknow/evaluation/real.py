@@ -106,6 +106,7 @@ REPORT_KEYS = (
     "filter",
     "forest",
     "prior_mean",
+    "identify",
     "errors",
     "mu_m",
     "ranges",
@@ -163,7 +164,8 @@ def load_real_object(data_dir: Path, obj: str | None = None) -> dict:
     episodes = {str(ep.object_index): ep for ep in read_shard(shard)}
     ep = episodes[key]
     with h5py.File(shard, "r") as f:
-        camera = SimConfig.model_validate(json.loads(f.attrs["sim_config"])).camera.model()
+        sim_config = SimConfig.model_validate(json.loads(f.attrs["sim_config"]))
+        camera = sim_config.camera.model()
         pushes = f["objects"][key]["pushes"]
         attrs = [dict(pushes[k].attrs) for k in sorted(pushes, key=int)]
     if not ep.records:
@@ -175,6 +177,7 @@ def load_real_object(data_dir: Path, obj: str | None = None) -> dict:
         "surface": surface,
         "shape": shape,
         "camera": camera,
+        "sim_config": sim_config,
         "import": info,
     }
 
@@ -372,15 +375,19 @@ def estimate_real_object(
     forest_trees: int = 200,
     rescale: bool = True,
     import_dir: Path | None = None,
+    identify: bool = True,
+    identify_config=None,
 ) -> dict:
-    """Filter, forest and prior-mean estimates on the real pushes of one object (module doc).
+    """Filter, forest, physics-based identification and prior-mean estimates on the real pushes
+    of one object (module doc).
 
     data_dir: an ``import-mit`` output or a folder of raw MIT Push files (imported into
     `import_dir`, default a temporary directory, time-rescaled to the model's training speed
     unless `rescale` is False; see `prepare_real_data`); model_path: a checkpoint or run
     directory (see `pushtoknow.pretrained.resolve_model_path`); forest_data: a simulated
     dataset directory to fit the forest on; obj: see `load_real_object`; num_sigma_points:
-    None = the model's.
+    None = the model's; identify: also fit φ by replaying the pushes in MuJoCo
+    (`identify_real`), with `identify_config` (an `IdentifyConfig`, None: the defaults).
 
     Returns a JSON-ready dict with the keys `REPORT_KEYS`, all SI:
     object ("surface:shape"), data_dir, model, forest_data, seed;
@@ -392,10 +399,12 @@ def estimate_real_object(
     friction_reference: `friction_reference`'s dict;
     filter: {"prior": {param: {mean, std}}, "per_push": [{param: {mean, std}}, ...],
     "sigma_points", "variant"}; forest: {"per_push": [...], "training_pushes", "trees"};
+    identify: None, or `identify_real`'s dict;
     prior_mean: {param: value}; errors: {"filter": [per push {param: e, "overall"}],
     "forest": [...], "prior_mean": {...}, "filter_prior": {...}} (e = |est − truth| / range);
     mu_m: {"truth", "filter" [{mean, std} per push], "forest" [per push], "prior_mean",
-    "errors": {"filter", "forest", "prior_mean"} (normalised by the μ·m catalogue range)};
+    "errors": {"filter", "forest", "prior_mean"} (normalised by the μ·m catalogue range)}, and
+    "identify" entries (errors, μ·m per push count) when identify ran;
     ranges: {param: [lo, hi]} of the catalogue; notes: list of caveats; seconds: wall time.
     Raises `DatasetError` (bad data_dir, object or forest_data) or `CheckpointError`.
     """
@@ -454,6 +463,9 @@ def estimate_real_object(
     _, first = np.unique(obj_idx, return_index=True)
     prior_mean = PriorMeanPredictor().fit(Y[first]).mean_
 
+    # ---- physics-based identification -------------------------------------------------------
+    ident = identify_real(data_dir, real, seed, identify_config) if identify else None
+
     # ---- errors ------------------------------------------------------------------------------
     errors = {
         "filter": [_errors(e.mean, truth) for e in estimates],
@@ -461,6 +473,10 @@ def estimate_real_object(
         "prior_mean": _errors(prior_mean, truth),
         "filter_prior": _errors(prior.mean, truth),
     }
+    if ident is not None:
+        errors["identify"] = [
+            _errors(np.array([p[n]["mean"] for n in PARAM_NAMES]), truth) for p in ident["per_push"]
+        ]
     mu_m_true = None if mu_true is None else ref.mass * mu_true
 
     def perr(v: float):
@@ -478,6 +494,9 @@ def estimate_real_object(
         "forest": [perr(v) for v in mu_m["forest"]],
         "prior_mean": perr(mu_m["prior_mean"]),
     }
+    if ident is not None:
+        mu_m["identify"] = [p["mu_m"] for p in ident["per_push"]]
+        mu_m["errors"]["identify"] = [perr(p["mean"]) for p in mu_m["identify"]]
 
     # ---- per push summary and notes -----------------------------------------------------------
     pushes = []
@@ -521,12 +540,73 @@ def estimate_real_object(
             "training_pushes": len(X),
             "trees": forest_trees,
         },
+        "identify": ident,
         "prior_mean": _params_dict(prior_mean),
         "errors": errors,
         "mu_m": mu_m,
         "ranges": {n: list(PARAM_RANGES[n]) for n in PARAM_NAMES},
         "notes": notes,
         "seconds": time.perf_counter() - t0,
+    }
+
+
+def identify_real(data_dir: Path, real: dict, seed: int, config=None) -> dict:
+    """`pushtoknow.identification.identify` on the first k real pushes of `real` (an object of
+    `load_real_object(data_dir)`), k = 1…K.
+
+    The pushes are replayed along their recorded pusher tracks (the pad is the probe: radius
+    `PUSHER_RADIUS`, frictionless; the table is the testbed's Coulomb contact at its grid of
+    supports under uniform pressure) in the import's footprint and settings, on the recorded
+    clock: a push time-rescaled by s at rate r Hz is the recording sampled at r·s Hz, so it is
+    replayed at that rate (the import's pushes must share one time scale). The recording has
+    no noise level, so each channel's noise is its misfit (`identify`).
+
+    Returns {"per_push": [{param: {mean, std, interval}, "mu_m": {mean, std, interval},
+    "unidentified", "reduced_chi2", "seconds", "rollouts"}] (after 1…K pushes), "rate_hz",
+    "noise_std" (last fit), "model": text, "notes" (last fit)}."""
+    from pushtoknow.identification.config import IdentifyConfig
+    from pushtoknow.identification.fit import identify
+    from pushtoknow.identification.replay import ReplayScene
+
+    records, attrs = real["records"], real["attrs"]
+    scales = sorted({round(float(a.get("mit_time_scale", 1.0)), 9) for a in attrs})
+    if len(scales) != 1:
+        raise DatasetError(
+            data_dir,
+            f"pushes with different time scales {scales}: identify needs one recorded clock",
+        )
+    sim = real["sim_config"]
+    rate = sim.tactile.rate_hz * scales[0]
+    sim = sim.model_copy(
+        update={"render": False, "tactile": sim.tactile.model_copy(update={"rate_hz": rate})}
+    )
+    spec = real["spec"]
+    cfg = config or IdentifyConfig()
+    scene = ReplayScene(spec.shape, spec.height, sim, stop_at_rest=cfg.stop_at_rest)
+    per_push, last = [], None
+    for k in range(1, len(records) + 1):
+        last = identify(records[:k], scene, cfg, seed)
+        d = last.as_dict()
+        per_push.append(
+            {
+                **d["parameters"],
+                "mu_m": d["mu_m"],
+                "unidentified": d["unidentified"],
+                "reduced_chi2": d["reduced_chi2"],
+                "seconds": d["seconds"],
+                "rollouts": d["rollouts"],
+            }
+        )
+    return {
+        "per_push": per_push,
+        "rate_hz": rate,
+        "noise_std": last.as_dict()["noise_std"],
+        "model": (
+            f"MuJoCo replay of the recorded pusher tracks: probe radius "
+            f"{sim.pad.radius * 1e3:.2f} mm, pad friction {sim.pad.friction:g}, table friction "
+            "Coulomb at the testbed's support grid (uniform pressure), footprint as imported"
+        ),
+        "notes": list(last.notes),
     }
 
 
@@ -588,11 +668,16 @@ def _fmt(v, name: str, std=None) -> str:
 
 def table_rows(report: dict) -> tuple[list[str], list[list[str]]]:
     """Header and rows (strings) of the estimates table: parameter (unit), truth, filter prior,
-    filter after each push (mean ± std), forest after the last push, prior mean."""
+    filter after each push (mean ± std), forest after the last push, physics-based
+    identification from all pushes (when it ran), prior mean."""
     n = len(report["filter"]["per_push"])
     header = ["parameter", "truth", "filter prior"]
     header += [f"filter after push {k + 1}" for k in range(n)]
-    header += [f"forest ({n} pushes)", "prior mean"]
+    header.append(f"forest ({n} pushes)")
+    ident = report.get("identify")
+    if ident is not None:
+        header.append(f"identify ({n} pushes)")
+    header.append("prior mean")
     rows = []
     for p in PARAM_NAMES:
         unit = DISPLAY[p][1]
@@ -602,13 +687,20 @@ def table_rows(report: dict) -> tuple[list[str], list[list[str]]]:
         for e in report["filter"]["per_push"]:
             row.append(_fmt(e[p]["mean"], p, e[p]["std"]))
         f = report["forest"]["per_push"][-1][p]
-        row += [_fmt(f["mean"], p, f["std"]), _fmt(report["prior_mean"][p], p)]
+        row.append(_fmt(f["mean"], p, f["std"]))
+        if ident is not None:
+            i = ident["per_push"][-1][p]
+            row.append(_fmt(i["mean"], p, i["std"]))
+        row.append(_fmt(report["prior_mean"][p], p))
         rows.append(row)
     mm = report["mu_m"]
     row = ["μ·m (kg)", _fmt(mm["truth"], "mu_m")]
     row.append(_fmt(mm["filter_prior"]["mean"], "mu_m", mm["filter_prior"]["std"]))
     row += [_fmt(e["mean"], "mu_m", e["std"]) for e in mm["filter"]]
-    row += [_fmt(mm["forest"][-1], "mu_m"), _fmt(mm["prior_mean"], "mu_m")]
+    row.append(_fmt(mm["forest"][-1], "mu_m"))
+    if ident is not None:
+        row.append(_fmt(mm["identify"][-1]["mean"], "mu_m", mm["identify"][-1]["std"]))
+    row.append(_fmt(mm["prior_mean"], "mu_m"))
     rows.append(row)
     return header, rows
 
@@ -626,6 +718,11 @@ def error_rows(report: dict) -> tuple[list[str], list[list[str]]]:
     rows = [["prior mean", *fmt(er["prior_mean"], mm["prior_mean"])]]
     rows += [[f"filter, push {k + 1}", *fmt(er["filter"][k], mm["filter"][k])] for k in range(n)]
     rows += [[f"forest, push {k + 1}", *fmt(er["forest"][k], mm["forest"][k])] for k in range(n)]
+    if "identify" in er:
+        rows += [
+            [f"identify, push {k + 1}", *fmt(er["identify"][k], mm["identify"][k])]
+            for k in range(n)
+        ]
     return header, rows
 
 
@@ -649,5 +746,16 @@ def markdown_table(report: dict, title: str | None = None) -> str:
         f"{p['filter_pose_error_end']['theta_deg']:.1f}°"
         for k, p in enumerate(report["pushes"])
     ]
+    ident = report.get("identify")
+    if ident is not None:
+        last = ident["per_push"][-1]
+        noise = ident["noise_std"]
+        push_lines.append(
+            f"- identify: {ident['model']}; replayed at {ident['rate_hz']:g} Hz (the recorded "
+            f"clock); noise from the misfit: force {noise['force_N']:.2f} N, position "
+            f"{noise['position_m'] * 1e3:.1f} mm, angle {math.degrees(noise['angle_rad']):.1f}°; "
+            f"not identified (prior width kept): {', '.join(last['unidentified']) or 'none'}; "
+            f"{last['rollouts']} rollouts in {last['seconds']:.0f} s"
+        )
     lines += push_lines + [""] + [f"- {n}" for n in report["notes"]] + [""]
     return "\n".join(lines)

@@ -61,6 +61,9 @@ from pushtoknow.testbed.sim import PushRecord
 TRACK_TOLERANCE = 1e-3  # m: a recorded pad track may depart this far from its commanded profile
 PENALTY_SCALE = 1e-3  # m of CoM projection (or 0.1 % of I_z excess) per unit penalty residual
 LEVEL = 0.9
+UNKNOWN_FORCE_NOISE = 0.1  # N: first guess for a recording without a noise level (real data)
+NOISE_FLOOR_SHARE = 1e-2  # an estimated noise level stays above this share of its first guess
+STEADY_AFTER = 1.0  # s: a constant push's force is steady from here (or its contact's middle)
 
 
 @dataclass(frozen=True)
@@ -102,6 +105,8 @@ class Identification:
     notes: tuple[str, ...] = field(default=())
     data_information: np.ndarray | None = None  # (5, 5) fit coordinates, unscaled
     last_step: np.ndarray | None = None  # (5,) fit coordinates
+    noise: np.ndarray | None = None  # (3,) force (N), position (m), angle (rad) std weighed by
+    noise_estimated: bool = False  # the noise came from the misfit (a recording without one)
 
     def zscore(self, truth) -> np.ndarray:
         """(5,) z-scores of a true φ (SI) in the normalised space where the belief is Gaussian."""
@@ -140,6 +145,14 @@ class Identification:
             "pushes": self.pushes,
             "profiles": list(self.profiles),
             "notes": list(self.notes),
+            "noise_std": None
+            if self.noise is None
+            else {
+                "force_N": float(self.noise[0]),
+                "position_m": float(self.noise[1]),
+                "angle_rad": float(self.noise[2]),
+                "estimated_from_misfit": self.noise_estimated,
+            },
             "data_information_fit": None
             if self.data_information is None
             else self.data_information.tolist(),
@@ -148,44 +161,52 @@ class Identification:
 
 
 def tracks_from_records(records: Sequence[PushRecord], sim_config: SimConfig) -> list[PushTrack]:
-    """The pushes to replay. Raises IdentificationError if there are none, if they differ in
-    length, or if a recorded pad track departs from its commanded profile (the replay drives
-    the commanded profile from the recorded start)."""
+    """The pushes to replay. A push whose recorded pad track follows its speed profile (within
+    `TRACK_TOLERANCE`; every simulated push) is replayed with that profile from its recorded
+    start; any other (a real pusher's) is replayed along its recorded pad track. Raises
+    IdentificationError if there are none, or if a push is too short or not finite."""
     if not records:
         raise IdentificationError("no pushes to identify from")
-    lengths = {len(r.time) for r in records}
-    if len(lengths) != 1:
-        raise IdentificationError(f"pushes of different lengths {sorted(lengths)} samples")
     tracks = []
     for i, r in enumerate(records):
+        if len(r.time) < 2:
+            raise IdentificationError(f"push {i}: {len(r.time)} sample(s); at least 2 are needed")
+        arrays = {"pusher": r.pusher, "pose": r.pose, "tactile": r.tactile[:, :2]}
+        for name, a in arrays.items():
+            if not np.isfinite(a).all():
+                raise IdentificationError(f"push {i}: non-finite values in its {name} track")
         try:
             want = pad_positions(r.push, r.time, sim_config.push, start=r.pusher[0])
-        except ValueError as e:
-            raise IdentificationError(f"push {i}: {e}") from None
-        dev = float(np.max(np.linalg.norm(want - r.pusher, axis=1)))
-        if dev > TRACK_TOLERANCE:
-            raise IdentificationError(
-                f"push {i}: the recorded pad track departs {dev * 1e3:.1f} mm from its "
-                f"{r.push.profile} profile; only pushes that follow the testbed's speed "
-                "profiles can be replayed"
-            )
+            follows = float(np.max(np.linalg.norm(want - r.pusher, axis=1))) <= TRACK_TOLERANCE
+        except ValueError:
+            follows = False
         tracks.append(
-            PushTrack(r.push, r.pusher[0].copy(), r.pose[0].copy(), r.tactile[:, :2], r.pose)
+            PushTrack(
+                r.push,
+                r.pusher[0].copy(),
+                r.pose[0].copy(),
+                r.tactile[:, :2],
+                r.pose,
+                None if follows else r.pusher.copy(),
+            )
         )
     return tracks
 
 
 def closed_form_start(records: Sequence[PushRecord], sim_config: SimConfig) -> dict:
     """Rough φ from the records alone: {"mu_m": kg, "mass": kg or None, "friction": or None}.
-    μ·m: largest median force magnitude of a constant push in steady contact (≤ μ·m·g; equal
-    on a centred push) over g; m and μ: medians of `testbed.fidelity.read_release` over
+    μ·m: largest median force magnitude of a constant push in steady contact (after
+    `STEADY_AFTER`, or after the middle of a shorter contact phase; ≤ μ·m·g, equal on a
+    centred push) over g; m and μ: medians of `testbed.fidelity.read_release` over
     release pushes (acceleration F = m(μg + a), free slide v²/(2μg))."""
     from pushtoknow.testbed.fidelity import read_release
 
     forces, masses, frictions = [], [], []
     for r in records:
         if r.push.profile == "constant":
-            steady = (r.time >= 1.0) & (r.tactile[:, 2] >= 0.5)
+            touching = r.tactile[:, 2] >= 0.5
+            mid = float(np.mean(r.time[touching])) if touching.any() else 0.0
+            steady = (r.time >= min(STEADY_AFTER, mid)) & touching
             if steady.any():
                 forces.append(float(np.median(np.linalg.norm(r.tactile[steady, :2], axis=1))))
         elif r.push.profile == "release":
@@ -226,23 +247,53 @@ def _describe(direction_z: np.ndarray) -> str:
     return " ".join(parts)
 
 
+NOISE_GROUPS = ((0, 1), (2, 3), (4,))  # force, position, angle columns of a residual sample
+
+
+def misfit_noise_scale(residuals: np.ndarray, lengths: Sequence[int]) -> np.ndarray:
+    """(5,) factors turning assumed noise levels into the misfit's own, per channel group.
+
+    residuals (N, 5): the weighted misfit samples (force x, y, x, y, θ), pushes of `lengths`
+    samples one after another. Per group: RMS × √((1 + ρ) / (1 − ρ)), ρ ∈ [0, 0.99] the lag-1
+    autocorrelation within pushes. A model error (what a real recording's misfit mostly is)
+    runs in long correlated stretches, and counting each of its samples as independent
+    evidence would make the intervals far too narrow; the AR(1) factor counts it by its
+    effective number of samples (a white misfit keeps factor RMS)."""
+    ends = np.cumsum(lengths)
+    starts = ends - np.asarray(lengths)
+    scale = np.ones(5)
+    for g in NOISE_GROUPS:
+        cols = residuals[:, list(g)]
+        rms = float(np.sqrt(np.mean(cols**2)))
+        num = den = 0.0
+        for a, b in zip(starts, ends):
+            x = cols[a:b]
+            num += float(np.sum(x[1:] * x[:-1]))
+            den += float(np.sum(x * x))
+        rho = float(np.clip(num / den if den > 0 else 0.0, 0.0, 0.99))
+        scale[list(g)] = max(rms, NOISE_FLOOR_SHARE) * np.sqrt((1 + rho) / (1 - rho))
+    return scale
+
+
 def laplace_posterior(
     h_data: np.ndarray,
     last_step: np.ndarray,
     prior_cov: np.ndarray,
     flat_information: float,
-    information_scale: float = 1.0,
+    information_scale: float | Sequence[float] = 1.0,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Posterior covariance (5, 5) in fit coordinates from the data information h_data (5, 5)
     at the optimum, the prior covariance and the last Gauss–Newton step (5,).
 
-    The data information, times `information_scale`, is diagonalised in prior-whitened
+    The data information, scaled by `information_scale` (one share, or one per fit
+    coordinate s: D^½ H D^½ with D = diag(s)), is diagonalised in prior-whitened
     coordinates (eigenvalue 1 = as informative as the prior); eigenvalues below
     `flat_information` are dropped (those directions keep the prior's width), the rest combine
     with the prior, and the last step's outer product is added. Returns (cov, eigenvalues (5,)
     ascending, eigenvectors (5, 5) in whitened coordinates, flat (5,) bool)."""
     chol = np.linalg.cholesky(prior_cov)
-    white = chol.T @ (information_scale * h_data) @ chol
+    root = np.sqrt(np.broadcast_to(np.asarray(information_scale, dtype=np.float64), (5,)))
+    white = chol.T @ (root[:, None] * h_data * root[None, :]) @ chol
     lam, vecs = np.linalg.eigh(0.5 * (white + white.T))
     lam = np.clip(lam, 0.0, None)
     flat = lam < flat_information
@@ -260,11 +311,12 @@ class _Problem:
         self.sigmas = sigmas  # (5,) force, force, x, y, θ
         self.footprint = footprint
         self.t_inv = np.linalg.inv(fit_transform())
-        obs = np.stack([np.column_stack([t.force, t.pose]) for t in tracks])  # (K, T, 5)
-        self.obs = obs[:, 1:]
+        # every sample after the first (which is the start state), pushes concatenated
+        self.obs = np.concatenate([np.column_stack([t.force, t.pose])[1:] for t in tracks])
+        self.push_lengths = [len(t.pose) - 1 for t in tracks]
         self.n_data = self.obs.size
         robust = np.zeros(self.obs.shape, dtype=bool)
-        robust[..., :2] = True  # the Huber loss applies to the force samples
+        robust[:, :2] = True  # the Huber loss applies to the force samples
         self.robust = robust.reshape(-1)
 
     def phi(self, u: np.ndarray) -> np.ndarray:
@@ -275,7 +327,8 @@ class _Problem:
         phis = self.phi(us)
         feas = [feasible(p, self.footprint) for p in phis]
         sims = self.pool.run(self.scene, np.stack([f[0] for f in feas]), self.tracks)
-        data = (sims[:, :, 1:] - self.obs[None]) / self.sigmas
+        sim = np.stack([np.concatenate([s[1:] for s in pushes]) for pushes in sims])
+        data = (sim - self.obs[None]) / self.sigmas
         pen = np.array([[m / PENALTY_SCALE, e / PENALTY_SCALE] for _, m, e in feas])
         return np.concatenate([data.reshape(len(us), -1), pen], axis=1)
 
@@ -299,7 +352,9 @@ def identify(
     check_testbed_version(scene.sim_config, "the pushes")
     tracks = tracks_from_records(records, scene.sim_config)
     footprint = scene.footprint
-    sigma_f = cfg.force_noise or max(scene.sim_config.tactile.force_noise_std, 1e-3)
+    recorded_noise = scene.sim_config.tactile.force_noise_std
+    noise_unknown = cfg.force_noise is None and recorded_noise == 0.0
+    sigma_f = cfg.force_noise or (UNKNOWN_FORCE_NOISE if noise_unknown else recorded_noise)
     sigmas = np.array([sigma_f, sigma_f, cfg.position_noise, cfg.position_noise, cfg.angle_noise])
     own_pool = pool is None
     pool = pool or RolloutPool(cfg.workers)
@@ -353,16 +408,15 @@ def identify(
         order = np.argsort(costs(res, starts), kind="stable")
 
         n = prob.n_data
-        best = None
-        iterations = refined = 0
         fd = np.asarray(cfg.fd_steps, dtype=np.float64)
-        for idx in order[: cfg.refine_starts]:
-            refined += 1
-            u, r = starts[idx].copy(), res[idx]
+        counts = {"iterations": 0}
+
+        def refine(u: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, float]:
+            """Levenberg–Marquardt from u (residuals r) → (u, r, cost, reduced χ²)."""
             cost = costs(r[None], u[None])[0]
             lam = 1e-2
             for _ in range(cfg.max_iterations):
-                iterations += 1
+                counts["iterations"] += 1
                 probe = u[None] + np.diag(fd)
                 rj = prob.residuals(probe)
                 report(5)
@@ -391,12 +445,24 @@ def identify(
                     or previous - cost < cfg.cost_tolerance
                 ):
                     break
-            chi2 = float(np.sum(r[:n] ** 2) / max(n - 5, 1))
-            if best is None or cost < best[2]:
-                best = (u, r, cost, chi2)
+            return u, r, cost, float(np.sum(r[:n] ** 2) / max(n - 5, 1))
+
+        best = None
+        refined = 0
+        for idx in order[: cfg.refine_starts]:
+            refined += 1
+            fit = refine(starts[idx].copy(), res[idx])
+            if best is None or fit[2] < best[2]:
+                best = fit
             if best[3] <= cfg.restart_chi2:
                 break
         u, r, cost, chi2 = best
+        if noise_unknown:
+            # the recording has no noise level: each channel group's noise is its misfit at
+            # the optimum (force, position, angle), and the fit is refined once under it
+            prob.sigmas *= misfit_noise_scale(r[:n].reshape(-1, 5), prob.push_lengths)
+            u, r, cost, chi2 = refine(u, prob.residuals(u[None])[0])
+        iterations = counts["iterations"]
 
         # ---- Laplace at the optimum, combined with the prior
         probe = np.concatenate([u[None] + np.diag(fd), u[None] - np.diag(fd)])
@@ -458,6 +524,14 @@ def identify(
             f"{refined} start(s)): a local minimum, or pushes the replay cannot reproduce; the "
             "intervals are widened by √χ² only and may be too narrow"
         )
+    if noise_unknown:
+        notes.append(
+            "the recording has no noise level (real data): each channel's noise is its "
+            "misfit at the optimum, counted by its effective number of samples (force "
+            f"{prob.sigmas[0]:.3g} N, position {prob.sigmas[2] * 1e3:.3g} mm, angle "
+            f"{np.degrees(prob.sigmas[4]):.3g}°), so "
+            "model error counts as noise and widens the intervals"
+        )
     if cf["mass"] is None:
         notes.append(
             "no release push: m and μ separate only through dynamic content (acceleration, "
@@ -487,4 +561,6 @@ def identify(
         notes=tuple(notes),
         data_information=h_data,
         last_step=newton,
+        noise=prob.sigmas[[0, 2, 4]].copy(),
+        noise_estimated=noise_unknown,
     )

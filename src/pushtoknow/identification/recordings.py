@@ -38,16 +38,25 @@ class RecordedObject:
 
 
 def _shard_paths(path: Path) -> list[Path]:
-    from pushtoknow.datasets.shards import SHARD_GLOB, list_shards
+    """Shards of a dataset directory, of one shard file, or of an inference run's output
+    (its RUN_PUSHES folder)."""
+    from pushtoknow.datasets.shards import RUN_PUSHES, SHARD_GLOB, list_shards
 
     path = Path(path)
     if path.is_file():
         return [path]
     if not path.exists():
-        raise IdentificationError(f"--pushes {path}: no such dataset directory or shard file")
+        raise IdentificationError(
+            f"--pushes {path}: no such dataset directory, inference run or shard file"
+        )
     shards = list_shards(path)
+    if not shards and (path / RUN_PUSHES).is_dir():
+        shards = list_shards(path / RUN_PUSHES)
     if not shards:
-        raise IdentificationError(f"--pushes {path}: empty dataset (no {SHARD_GLOB} files)")
+        raise IdentificationError(
+            f"--pushes {path}: empty dataset (no {SHARD_GLOB} files, nor an inference run's "
+            f"{RUN_PUSHES}/ folder)"
+        )
     return shards
 
 

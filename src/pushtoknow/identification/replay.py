@@ -43,7 +43,10 @@ class PushTrack:
 
     push: the action; start (2,): pad start (m, world, the record's pusher[0]);
     pose0 (3,): object pose (x, y, θ) at the start, record frame; force (T, 2): measured
-    tactile force (N, world, by the pad on the object); pose (T, 3): measured pose track.
+    tactile force (N, world, by the pad on the object); pose (T, 3): measured pose track;
+    pad (T, 2) or None: the recorded pad track to drive the pad along (m, world), for a push
+    that does not follow the testbed's speed profiles (a real pusher); None replays the
+    push's profile from `start`.
     """
 
     push: Push
@@ -51,6 +54,7 @@ class PushTrack:
     pose0: np.ndarray
     force: np.ndarray
     pose: np.ndarray
+    pad: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -108,6 +112,7 @@ def simulate_track(scene: ReplayScene, phi: np.ndarray, track: PushTrack) -> np.
             render=False,
             start=track.start,
             stop_at_rest=scene.stop_at_rest,
+            pad_track=track.pad,
         )
     finally:
         sim.close()
@@ -148,9 +153,11 @@ class RolloutPool:
             self._pool.shutdown()
             self._pool = None
 
-    def run(self, scene: ReplayScene, phis: np.ndarray, tracks: list[PushTrack]) -> np.ndarray:
-        """phis (B, 5) simulable SI → (B, K, T, 5) force and pose of each push (see
-        `simulate_track`)."""
+    def run(
+        self, scene: ReplayScene, phis: np.ndarray, tracks: list[PushTrack]
+    ) -> list[list[np.ndarray]]:
+        """phis (B, 5) simulable SI → B lists of K arrays (T_k, 5): force and pose of each
+        push (see `simulate_track`)."""
         phis = np.atleast_2d(np.asarray(phis, dtype=np.float64))
         tasks = [(scene, phi, tr) for phi in phis for tr in tracks]
         if self.workers <= 1:
@@ -164,4 +171,4 @@ class RolloutPool:
         self.rollouts += len(phis)
         self.push_rollouts += len(tasks)
         k = len(tracks)
-        return np.stack([np.stack(out[b * k : (b + 1) * k]) for b in range(len(phis))])
+        return [out[b * k : (b + 1) * k] for b in range(len(phis))]

@@ -216,11 +216,18 @@ class PushSimulator:
         trace: bool = False,
         start: np.ndarray | None = None,
         stop_at_rest: float | None = None,
+        pad_track: np.ndarray | None = None,
     ) -> PushRecord:
         """Run one push from the current state; returns its record.
 
         start (2,): the pad's start (m, world); None finds it on the true geometry
         (`pad_start`). Replaying a recorded push passes its `pusher[0]`.
+        pad_track (T, 2): drive the pad along this recorded track instead of the push's speed
+        profile (m, world, the pad centre at the samples' times k / rate; linear in between,
+        so the pad's velocity is constant within a sample), e.g. a real robot's pusher. The
+        record then has T samples, starts at pad_track[0] (`start` is ignored) and every
+        sample uses the fine physics step (`dynamic_substeps`): a recorded pusher may start,
+        stop and change speed anywhere.
         stop_at_rest: once the pad has stopped for good and the object's speed is below this
         (m/s, and the same in rad/s), stop simulating and hold the last pose, with zero force,
         for the remaining samples (a release push's object at rest stays there, up to
@@ -230,13 +237,21 @@ class PushSimulator:
         render = cfg.render if render is None else render
         dt = self.model.opt.timestep
         rate = cfg.tactile.rate_hz
-        n_samples = int(round(cfg.push.horizon * rate))
         steps_per_sample = int(round(1.0 / (rate * dt)))
-        profile = self.profile(push)
         u = push.unit
-        start = self.pad_start(push) if start is None else np.asarray(start, dtype=np.float64)
+        if pad_track is not None:
+            pad_track = np.asarray(pad_track, dtype=np.float64)
+            if pad_track.ndim != 2 or pad_track.shape[1] != 2 or len(pad_track) < 2:
+                raise ValueError(f"pad_track must be (T ≥ 2, 2), got {pad_track.shape}")
+            if not np.isfinite(pad_track).all():
+                raise ValueError("pad_track holds non-finite positions")
+            T = len(pad_track)
+            start = pad_track[0]
+        else:
+            profile = self.profile(push)
+            T = int(round(cfg.push.horizon * rate)) + 1
+            start = self.pad_start(push) if start is None else np.asarray(start, dtype=np.float64)
 
-        T = n_samples + 1
         pose = np.zeros((T, 3))
         force = np.zeros((T, 2))
         contact_share = np.zeros(T)
@@ -257,25 +272,38 @@ class PushSimulator:
         # release push accelerates, releases and slides. The pad trajectory at every step is
         # computed once (the loop only copies it in).
         substeps = np.ones(T, dtype=np.int64)
-        if push.profile == "release":
+        if pad_track is not None:
+            substeps[1:] = cfg.physics.dynamic_substeps
+        elif push.profile == "release":
             dynamic_end = profile.times[-2] + SLIDE_WINDOW
             substeps[1:] = np.where(time[:-1] < dynamic_end, cfg.physics.dynamic_substeps, 1)
         step_dt = np.repeat(dt / substeps[1:], steps_per_sample * substeps[1:])
         t_steps = np.concatenate([[0.0], np.cumsum(step_dt)[:-1]])
-        pad_pos = start[None] + np.outer(profile.distance(t_steps), u)
-        pad_vel = np.outer(np.interp(t_steps, profile.times, profile.speeds), u)
+        if pad_track is not None:
+            pad_pos = np.column_stack([np.interp(t_steps, time, pad_track[:, i]) for i in (0, 1)])
+            seg_vel = np.diff(pad_track, axis=0) * rate  # (T - 1, 2)
+            seg = np.minimum(np.searchsorted(time, t_steps, side="right") - 1, T - 2)
+            pad_vel = seg_vel[seg]
+            moving_seg = np.flatnonzero(np.any(seg_vel != 0.0, axis=1))
+            last = moving_seg[-1] if len(moving_seg) else None
+            pad_stops = np.inf if last is None or last == T - 2 else time[last + 1]
+            vel0 = seg_vel[0]
+        else:
+            pad_pos = start[None] + np.outer(profile.distance(t_steps), u)
+            pad_vel = np.outer(np.interp(t_steps, profile.times, profile.speeds), u)
+            moving = [i for i, v in enumerate(profile.speeds) if v != 0.0]
+            pad_stops = (
+                np.inf
+                if not moving or moving[-1] == len(profile.speeds) - 1
+                else (profile.times[moving[-1] + 1])
+            )
+            vel0 = u * profile.speed(0.0)
 
         model, data = self.model, self.data
         qa, va = self._pad_qpos, self._pad_qvel
-        self._set_pad(start, u * profile.speed(0.0))
+        self._set_pad(start, vel0)
         mujoco.mj_forward(model, data)
         step = 0
-        moving = [i for i, v in enumerate(profile.speeds) if v != 0.0]
-        pad_stops = (
-            np.inf
-            if not moving or moving[-1] == len(profile.speeds) - 1
-            else (profile.times[moving[-1] + 1])
-        )
         if stop_at_rest is not None and render:
             raise ValueError("stop_at_rest needs render=False (the held samples have no images)")
         try:
