@@ -356,6 +356,8 @@ def test_identify_row_replays_the_recorded_clock_and_reports_every_push(
     # μ·m is what quasi-static pushes reveal: within 40% of the measured reference
     assert r["mu_m"]["identify"][-1]["mean"] == pytest.approx(r["mu_m"]["truth"], rel=0.4)
     assert "probe radius 4.75 mm" in ident["model"]
+    # three pushes: the leave-one-push-out check ran and its spread joined the intervals
+    assert any("leave-one-push-out" in n for n in ident["notes"])
     md = markdown_table(r, "rect1")
     assert "identify (3 pushes)" in md and md.count("| identify, push") == 3
 
@@ -367,3 +369,12 @@ def test_identify_refuses_pushes_on_different_clocks(real_dir_rescaled, tmp_path
     real["attrs"][1] = {**real["attrs"][1], "mit_time_scale": 2.0}
     with pytest.raises(DatasetError, match="different time scales"):
         identify_real(real_dir_rescaled, real, seed=0)
+
+
+def test_identify_reads_a_rescaled_import_on_its_recorded_clock(real_dir, real_dir_rescaled):
+    from pushtoknow.identification.recordings import load_recorded_objects
+
+    (as_recorded,) = load_recorded_objects(real_dir)
+    (rescaled,) = load_recorded_objects(real_dir_rescaled)
+    assert as_recorded.sim_config.tactile.rate_hz == pytest.approx(10.0)
+    assert rescaled.sim_config.tactile.rate_hz == pytest.approx(50.0)  # 10 Hz × scale 5

@@ -66,6 +66,7 @@ def test_fit_recovers_the_truth_within_its_intervals():
     assert np.hypot(*(res.mean[2:4] - truth[2:4])) < 1.5e-3
     assert abs(res.mean[0] / 0.7 - 1) < 0.10
     assert res.rollouts > 0 and res.push_rollouts == 2 * res.rollouts
+    assert (res.std[2:4] >= CFG.com_floor).all()  # never more precise than the floor
     # reproducible: same inputs and seed, same result
     again = identify(records, _scene(spec), CFG, seed=0)
     np.testing.assert_array_equal(res.mean, again.mean)

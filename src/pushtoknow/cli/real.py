@@ -56,8 +56,8 @@ def estimate_real(
 ):
     """Estimate a real object's parameters from its recorded pushes (filter after every push,
     random forest, physics-based identification, prior mean) and compare with its known mass,
-    I_z, CoM and a friction measured on its pure translations. Raw MIT Push files are converted first, time-rescaled
-    to the model's training speed unless --no-rescale."""
+    I_z, CoM and a friction measured on its pure translations. Raw MIT Push files are
+    converted first, time-rescaled to the model's training speed unless --no-rescale."""
     from pushtoknow.evaluation.real import error_rows, estimate_real_object, markdown_table
     from pushtoknow.pretrained import resolve_model_path
 

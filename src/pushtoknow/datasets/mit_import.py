@@ -149,6 +149,7 @@ TIME_SCALE_CONVENTION = (
     "time). Assumes quasi-static pushing (rate-independent). s stored as mit_time_scale"
 )
 _PART_SUFFIX = ".part"
+TIME_SCALE_ATTR = "mit_time_scale"  # per push attribute: the time rescaling s (1: as recorded)
 
 
 # ============================================================================================
@@ -331,7 +332,7 @@ def convert_push(
         "mit_friction": np.nan if mu is None else mu,
         "mit_contact_span": np.array(_contact_span(push), dtype=np.int64),
         "mit_meta": json.dumps(_meta_dict(push.meta)),
-        "mit_time_scale": float(time_scale),
+        TIME_SCALE_ATTR: float(time_scale),
     }
     return record, attrs
 

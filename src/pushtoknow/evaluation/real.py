@@ -68,9 +68,9 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from pushtoknow.common.errors import DatasetError
+from pushtoknow.common.errors import DatasetError, IdentificationError
 from pushtoknow.common.params import GRAVITY, PARAM_NAMES, PARAM_RANGES, product_moments
-from pushtoknow.datasets.mit_import import IMPORT_FILE
+from pushtoknow.datasets.mit_import import IMPORT_FILE, TIME_SCALE_ATTR
 from pushtoknow.datasets.mit_push import mit_object
 from pushtoknow.datasets.shards import list_shards, read_shard
 from pushtoknow.evaluation.metrics import param_ranges
@@ -508,7 +508,7 @@ def estimate_real_object(
                 "file": str(pa.get("mit_file", "")),
                 "speed_m_per_s": float(rec.push.speed),
                 "file_speed_m_per_s": meta.get("speed_m_per_s"),
-                "time_scale": float(pa.get("mit_time_scale", 1.0)),
+                "time_scale": float(pa.get(TIME_SCALE_ATTR, 1.0)),
                 "samples": len(rec.time),
                 "displacement_m": float(np.hypot(d[0], d[1])),
                 "rotation_deg": fr["rotation_deg"],
@@ -566,20 +566,18 @@ def identify_real(data_dir: Path, real: dict, seed: int, config=None) -> dict:
     "noise_std" (last fit), "model": text, "notes" (last fit)}."""
     from pushtoknow.identification.config import IdentifyConfig
     from pushtoknow.identification.fit import identify
+    from pushtoknow.identification.recordings import recorded_clock
     from pushtoknow.identification.replay import ReplayScene
 
     records, attrs = real["records"], real["attrs"]
-    scales = sorted({round(float(a.get("mit_time_scale", 1.0)), 9) for a in attrs})
-    if len(scales) != 1:
-        raise DatasetError(
-            data_dir,
-            f"pushes with different time scales {scales}: identify needs one recorded clock",
+    try:
+        sim = recorded_clock(
+            real["sim_config"], [a.get(TIME_SCALE_ATTR, 1.0) for a in attrs], str(data_dir)
         )
-    sim = real["sim_config"]
-    rate = sim.tactile.rate_hz * scales[0]
-    sim = sim.model_copy(
-        update={"render": False, "tactile": sim.tactile.model_copy(update={"rate_hz": rate})}
-    )
+    except IdentificationError as e:
+        raise DatasetError(data_dir, str(e).split(": ", 1)[1]) from None
+    sim = sim.model_copy(update={"render": False})
+    rate = sim.tactile.rate_hz
     spec = real["spec"]
     cfg = config or IdentifyConfig()
     scene = ReplayScene(spec.shape, spec.height, sim, stop_at_rest=cfg.stop_at_rest)

@@ -73,7 +73,21 @@ class IdentifyConfig(Config):
         "is). Below 1 it widens identified directions for what the noise model leaves out: the "
         "simulator's jitter and an optimum located only to within it (0.3: 1.8-fold, 0.5: "
         "1.4-fold). Chosen for 90% coverage on 32 novel objects (seeds 1 and 2, 5 mixed "
-        "pushes, docs/identification)",
+        "pushes, docs/identification), with `com_floor`",
+    )
+    com_floor: float = Field(
+        5e-5,
+        ge=0,
+        description="m: the CoM is not reported more precisely than this std (added in "
+        "quadrature): a few pushes can locate it to a few µm by the curvature, below what the "
+        "replay's step-to-step jitter allows; chosen for 90% coverage on 48 novel objects "
+        "(seeds 1–3, 5 mixed pushes, docs/identification)",
+    )
+    between_push_check: bool = Field(
+        True,
+        description="for a recording without a noise level (real data) and ≥ 3 pushes: fit "
+        "again leaving out each push in turn and add the jackknife covariance of those fits "
+        "(pushes that disagree reveal model error; K more fits)",
     )
     stop_at_rest: float = Field(
         1e-4, gt=0, description="m/s: a replayed release push stops once pad and object rest"

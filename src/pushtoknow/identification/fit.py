@@ -495,7 +495,34 @@ def identify(
         z_map = t_inv @ u
         cov_z = t_inv @ cov_u @ t_inv.T
         cov_z = 0.5 * (cov_z + cov_z.T)
+        com = [PARAM_NAMES.index("com_x"), PARAM_NAMES.index("com_y")]
+        cov_z[com, com] += (cfg.com_floor / space_scale()[com]) ** 2
         unidentified = tuple(_describe(t_inv @ chol @ vecs[:, j]) for j in np.where(flat)[0])
+        spread = None
+        if noise_unknown and cfg.between_push_check and len(records) >= 3:
+            # the pushes' disagreement is model error the misfit's noise level cannot show:
+            # the jackknife covariance of leave-one-push-out fits joins the posterior's
+            offset = np.zeros(5)
+            offset[2:4] = np.array(scene.frame_offset) / space_scale()[2:4]
+            quiet = cfg.model_copy(update={"between_push_check": False})
+            loo = np.stack(
+                [
+                    identify(
+                        [rec for j, rec in enumerate(records) if j != i],
+                        scene,
+                        quiet,
+                        seed,
+                        progress,
+                        pool,
+                    ).mean_norm
+                    - offset
+                    for i in range(len(records))
+                ]
+            )
+            k = len(records)
+            dev = loo - loo.mean(axis=0)
+            spread = (k - 1) / k * dev.T @ dev
+            cov_z = cov_z + spread
     finally:
         if own_pool:
             pool.close()
@@ -531,6 +558,13 @@ def identify(
             f"{prob.sigmas[0]:.3g} N, position {prob.sigmas[2] * 1e3:.3g} mm, angle "
             f"{np.degrees(prob.sigmas[4]):.3g}°), so "
             "model error counts as noise and widens the intervals"
+        )
+    if spread is not None:
+        widened = np.sqrt(np.diagonal(cov_z) / np.maximum(np.diagonal(cov_z - spread), 1e-300))
+        notes.append(
+            "leave-one-push-out fits disagree: their jackknife covariance is added (std "
+            + ", ".join(f"{n} ×{f:.1f}" for n, f in zip(PARAM_NAMES, widened))
+            + ")"
         )
     if cf["mass"] is None:
         notes.append(

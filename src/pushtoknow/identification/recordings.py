@@ -60,9 +60,29 @@ def _shard_paths(path: Path) -> list[Path]:
     return shards
 
 
+def recorded_clock(sim_config: SimConfig, time_scales, where: str) -> SimConfig:
+    """The settings to replay pushes on the clock they were recorded on. A push time-rescaled
+    by s (`import-mit --as-speed`: its samples relabelled k / r, r the stored rate) is the
+    recording sampled at r·s Hz, so it is replayed at that rate. The pushes must share one s;
+    raises IdentificationError naming `where` otherwise."""
+    scales = sorted({round(float(s), 9) for s in time_scales})
+    if len(scales) > 1:
+        raise IdentificationError(
+            f"{where}: pushes with different time scales {scales}: identify needs one "
+            "recorded clock (import them separately)"
+        )
+    if not scales or scales[0] == 1.0:
+        return sim_config
+    tactile = sim_config.tactile.model_copy(
+        update={"rate_hz": sim_config.tactile.rate_hz * scales[0]}
+    )
+    return sim_config.model_copy(update={"tactile": tactile})
+
+
 def load_recorded_objects(path: Path) -> list[RecordedObject]:
     """Every object of a dataset directory (or one shard file), pushes without images (S_0
     kept). Raises DatasetError / IdentificationError naming the problem."""
+    from pushtoknow.datasets.mit_import import TIME_SCALE_ATTR
     from pushtoknow.datasets.shards import open_shard, read_push
 
     out = []
@@ -81,9 +101,9 @@ def load_recorded_objects(path: Path) -> list[RecordedObject]:
                 truth = (
                     np.asarray(g.attrs["params"], dtype=np.float64) if "params" in g.attrs else None
                 )
-                records = tuple(
-                    read_push(shard, pushes[k], images=False) for k in sorted(pushes, key=int)
-                )
+                keys = sorted(pushes, key=int)
+                records = tuple(read_push(shard, pushes[k], images=False) for k in keys)
+                scales = [float(pushes[k].attrs.get(TIME_SCALE_ATTR, 1.0)) for k in keys]
                 shape = d.get("shape")
                 out.append(
                     RecordedObject(
@@ -93,7 +113,7 @@ def load_recorded_objects(path: Path) -> list[RecordedObject]:
                         height=float(d.get("height", 0.013)),
                         truth=truth,
                         records=records,
-                        sim_config=sim_config,
+                        sim_config=recorded_clock(sim_config, scales, f"{shard} object {key}"),
                     )
                 )
     if not out:
