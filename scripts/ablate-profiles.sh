@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Speed-profile ablation (issue 5 (c)) from scratch, on the CPU: data with a speed profile drawn
+# Speed-profile ablation from scratch, on the CPU: data with a speed profile drawn
 # per push from {constant, release} (400 catalogue-train objects × 4 pushes, seed 1), a VT-ADDF
 # trained on it (configs/profiles-vt-addf.yaml, VisNet reused from the shipped model), then
 # `pushtoknow ablate-profiles` on 44 held-out objects: uniform and active-entropy, each with and

@@ -33,7 +33,7 @@ if [ -d "$SAMPLE" ]; then
         echo "physics-based fit (\`pushtoknow identify\`), replaying the recorded pusher tracks in"
         echo "MuJoCo on the recorded 50 Hz clock, after 1, 2 and 3 pushes. Truth: MIT mass and"
         echo "I_z, CoM at the centroid, friction = mean‖F‖/(m·g) over the contact phase of the pure"
-        echo "translations (|Δθ| < 2°). Command:"
+        echo "translations that slid (|Δθ| < 2°, travel ≥ 10 mm). Command:"
         echo
         echo "    pushtoknow estimate-real $WORK/real/rect1-as20 --model pretrained --forest-data $WORK/data --seed 0"
         echo
@@ -43,7 +43,7 @@ if [ -d "$SAMPLE" ]; then
 else
     echo "no $SAMPLE: RESULTS.md will have no real-data section" >&2
 fi
-# learning efficiency (issue 5): ~40 min; skipped where done (the run resumes)
+# learning efficiency: ~40 min; skipped where done (the run resumes)
 .venv/bin/pushtoknow ablate-efficiency --config configs/efficiency.yaml --out "$WORK/efficiency" \
     --seed 0
 .venv/bin/python -c "import json, sys; from pushtoknow.evaluation.report import efficiency_markdown
@@ -53,7 +53,7 @@ print(efficiency_markdown(json.load(open(sys.argv[1])), sys.argv[2]))" \
     > "$WORK/efficiency/section.md"
 APPEND+=(--append "$WORK/efficiency/section.md")
 
-# speed profiles (issue 5 (c)): ~40 min; its data, model and conditions are skipped where done
+# speed profiles: ~40 min; its data, model and conditions are skipped where done
 bash scripts/ablate-profiles.sh "$WORK/profiles"
 APPEND+=(--append "$WORK/profiles/ablation/section.md")
 

@@ -23,6 +23,18 @@ def test_simulate_then_info(tmp_path):
     info = json.loads(run("dataset", "info", str(out), "--json").stdout)
     assert info["schema_version"] == 1 and info["testbed_version"] == 2
     assert (info["objects"], info["pushes"], info["steps"]) == (4, 8, 8 * 61)  # 6 s at 10 Hz
+    assert info["expected_objects"] == 4 and info["complete"] is True
+    # an interrupted run: its record plans more objects than the shards hold
+    import shutil
+
+    cut = tmp_path / "cut"
+    shutil.copytree(out, cut)
+    gen = json.loads((cut / "generation.json").read_text())
+    gen["config"]["objects"] = 8
+    (cut / "generation.json").write_text(json.dumps(gen))
+    r = run("dataset", "info", str(cut), "--json")
+    assert json.loads(r.stdout)["complete"] is False
+    assert "incomplete: 4 of 8 objects" in r.stderr
     # Re-running resumes: nothing to do.
     r = run("simulate", "--objects", "4", "--pushes", "2", "--out", str(out), "--seed", "0")
     assert "wrote 0 shards, skipped 1" in r.stdout

@@ -34,7 +34,7 @@ def test_prior_mean_on_grid_is_about_0_4():
     m, _ = prior.predict(len(grid))
     r = nrmse(m, grid)
     for k in PARAM_NAMES:
-        assert 0.3 < r[k] < 0.45  # SPEC §3.7: ≈0.37–0.41 on the grid
+        assert 0.3 < r[k] < 0.45  # docs/DESIGN.md §9: ≈0.37–0.41 on the grid
 
 
 def test_coverage_of_calibrated_gaussian():

@@ -1,4 +1,4 @@
-"""Speed-profile ablation (issue 5 (c)) on the tiny model: conditions, release shares, resume,
+"""Speed-profile ablation on the tiny model: conditions, release shares, resume,
 and the fold summary against a hand computation."""
 
 import json

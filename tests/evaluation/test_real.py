@@ -122,6 +122,15 @@ def test_friction_reference_rule_on_synthetic_records():
     )
     assert ref["value"] is None
     assert ref["pushes"][1]["mu_contact_phase"] is None
+    # A glancing push that moved the object 2 mm is no friction reference (it did not slide
+    # far enough to balance the full friction); the 5 cm one is.
+    glancing = _record(0.1 * mu_m_g, 0.0)
+    glancing.pose[:, 0] = np.linspace(0, 0.002, len(glancing.pose))
+    ref = friction_reference([glancing, _record(mu_m_g, 0.0)], m)
+    assert ref["value"] == pytest.approx(0.3)
+    assert [p["pure_translation"] for p in ref["pushes"]] == [False, True]
+    assert ref["pushes"][0]["travel_m"] == pytest.approx(0.002)
+    assert friction_reference([glancing], m)["value"] is None
 
 
 def test_friction_reference_on_the_real_pushes(real_dir, real_dir_rescaled):

@@ -52,7 +52,7 @@ def test_pushed_block_posterior_converges_and_is_calibrated():
 
 
 def test_kept_cross_covariance_inflates_the_pose_variance():
-    """SPEC's literal reassembly (C kept) vs the default: see DualFilter's docstring."""
+    """The paper's literal reassembly (C kept) vs the default: see DualFilter's docstring."""
     toy = pushed_block()
     _, obs = toy.simulate(16, 4, torch.Generator().manual_seed(0))
     _, kf_cov = toy.kalman(obs)
@@ -191,7 +191,7 @@ def test_bad_input_is_rejected_with_clear_errors():
 
 
 def test_joint_sample_weighting_degrades_over_long_runs():
-    """SPEC's literal weights (sampled poses) vs the default marginal weights, 300 steps."""
+    """The paper's literal weights (sampled poses) vs the default marginal weights, 300 steps."""
     toy = random_walk_toy()
     _, obs = toy.simulate(16, 300, torch.Generator().manual_seed(12))
     kf_mean, kf_cov = toy.kalman(obs)

@@ -270,3 +270,28 @@ def test_prior_coverage_level_is_checked():
     p = ParamPrior(torch.zeros(2), torch.eye(2))
     with pytest.raises(ValueError, match="prior coverage level"):
         p.covering_range(1.0)
+
+
+def test_damaged_weights_are_refused_naming_the_file(saved, tmp_path):
+    """A checkpoint stores a SHA-256 of its weights: bytes changed inside a weight tensor
+    (a damaged file) or a non-finite weight give a CheckpointError naming the file, never a
+    model that predicts from garbage."""
+    from pushtoknow.models.checkpoint import weights_digest
+
+    _, run = saved
+    payload = torch.load(run / CHECKPOINT_FILE, weights_only=True)
+    assert payload["weights_sha256"] == weights_digest(
+        payload["models_state"], payload["visnet_state"]
+    )
+    name = next(k for k, t in payload["visnet_state"].items() if t.is_floating_point())
+    damaged = dict(payload, visnet_state=dict(payload["visnet_state"]))
+    damaged["visnet_state"][name] = damaged["visnet_state"][name] + 1e-3
+    torch.save(damaged, tmp_path / "damaged.pt")
+    with pytest.raises(CheckpointError, match=r"damaged\.pt: the weights do not match"):
+        load_checkpoint(tmp_path / "damaged.pt")
+    # an old checkpoint without a digest still gets the finiteness check
+    nan = {k: v for k, v in damaged.items() if k != "weights_sha256"}
+    nan["visnet_state"][name] = torch.full_like(nan["visnet_state"][name], float("nan"))
+    torch.save(nan, tmp_path / "nan.pt")
+    with pytest.raises(CheckpointError, match=f"weight {name} holds NaN"):
+        load_checkpoint(tmp_path / "nan.pt")

@@ -149,7 +149,7 @@ def test_continuous_sampler_is_seeded_and_in_range():
 @pytest.mark.parametrize("name", [n for n in CATALOGUE_SHAPES if n != "butter"])
 def test_catalogue_shapes_match_mit_push_frames(name):
     # Same footprint and frame as the real objects (MIT Push reader), so parameters mean the
-    # same in simulation and on real data. butter differs on purpose: SPEC §3.1 asks for a
+    # same in simulation and on real data. butter differs on purpose: docs/DESIGN.md §3 uses a
     # convex approximation; the real outline is non-convex.
     from shapely.geometry import Polygon
 

@@ -1,4 +1,4 @@
-"""Physics of the testbed against closed forms (SPEC §3.1, §3.8)."""
+"""Physics of the testbed against closed forms (docs/DESIGN.md §3, §10)."""
 
 import math
 import subprocess

@@ -1,4 +1,4 @@
-"""Active push selection (paper §III-E, SPEC §3.5): N-step look-ahead scores of candidate
+"""Active push selection (paper §III-D, docs/DESIGN.md §7): N-step look-ahead scores of candidate
 pushes with the filter's prediction step, and the policy that pushes the best one.
 
 A layer above `pushtoknow.filters` and below training/inference: plain tensors and the filter

@@ -1,4 +1,4 @@
-"""Push policies: pick one of M candidate pushes given the current belief (SPEC §3.5).
+"""Push policies: pick one of M candidate pushes given the current belief (docs/DESIGN.md §7).
 
 The policy sees only tensors and a caller-supplied `context_builder(pushes, step)` that turns
 candidate pushes into the filter context of look-ahead step `step`, batched over the pushes

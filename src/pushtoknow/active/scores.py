@@ -55,7 +55,7 @@ def kl_information_gain(
     dims: Dims = None,
     config: CholeskyConfig = DEFAULT_CHOLESKY,
 ) -> torch.Tensor:
-    """IG_N = KL( N(μ_N, Σ_N) ‖ N(μ_0, Σ_0) ) (B,) in nats (paper eq. 17, SPEC §3.5).
+    """IG_N = KL( N(μ_N, Σ_N) ‖ N(μ_0, Σ_0) ) (B,) in nats (paper eq. 17, docs/DESIGN.md §7).
 
     mean_n, mean_0 (B, D); cov_n, cov_0 (B, D, D): the belief after N prediction steps and
     the current one. dims: score only that marginal block (K of the D components). Closed

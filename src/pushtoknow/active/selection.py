@@ -1,9 +1,9 @@
-"""N-step look-ahead scores of M candidate pushes, all evaluated as one batch (SPEC §3.5).
+"""N-step look-ahead scores of M candidate pushes, all evaluated as one batch (docs/DESIGN.md §7).
 
 From the current belief N(μ_0, Σ_0) (one object), each candidate's belief is rolled forward
 N steps with the filter's prediction step under that candidate's context. Two scores:
 
-* "kl" (SPEC §3.5 / paper eq. 17, policy "active-kl"): prediction only, no updates;
+* "kl" (docs/DESIGN.md §7 / paper eq. 17, policy "active-kl"): prediction only, no updates;
   IG_N = KL( N(μ_N, Σ_N) ‖ N(μ_0, Σ_0) ) over the whole state. The prediction leaves the
   parameter marginal unchanged (χ̄_φ = χ_φ), so this rewards pushes whose predicted pose moves
   and spreads most.

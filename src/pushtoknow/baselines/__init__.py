@@ -1,1 +1,1 @@
-"""Baselines: Mavrakis-style features + multi-output random forest (SPEC §3.7)."""
+"""Baselines: Mavrakis-style features + multi-output random forest (docs/DESIGN.md §9)."""

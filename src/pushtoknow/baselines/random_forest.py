@@ -1,4 +1,4 @@
-"""Random-forest baseline (Mavrakis et al., as used by the paper; SPEC §3.7).
+"""Random-forest baseline (Mavrakis et al., as used by the paper; docs/DESIGN.md §9).
 
 Hand-crafted features of each push, all in the object's initial frame (so they do not depend on
 where the object lies): the contact point and push direction relative to the object; the

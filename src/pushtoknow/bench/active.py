@@ -1,4 +1,4 @@
-"""Benchmark of one active push decision (SPEC §3.5) with the paper-sized learned models.
+"""Benchmark of one active push decision (docs/DESIGN.md §7) with the paper-sized learned models.
 
 One decision = score M candidate pushes as one batch over an N-step look-ahead and pick the
 best: building each step's `PushContext` (pad where `testbed.push.pad_positions` puts it),
@@ -39,7 +39,7 @@ from pushtoknow.testbed.push import PROFILES, Push, pad_positions
 
 DISC_RADIUS_M = 0.04
 FOOTPRINT_VERTICES = 24
-DIRECTION_JITTER_RAD = math.radians(5.0)  # paper §III-E: pd = cn + δ, δ ~ U(-5°, 5°)
+DIRECTION_JITTER_RAD = math.radians(5.0)  # paper §III-D: pd = cn + δ, δ ~ U(-5°, 5°)
 PRIOR_VARIANCES = (1e-4, 1e-4, 1e-2, 0.3, 0.3, 0.3, 0.3, 0.3)  # m², m², rad², normalised
 HORIZON_FRACTION = 0.5
 

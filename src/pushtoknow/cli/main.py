@@ -9,11 +9,17 @@ from pathlib import Path
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
+import enum
+
 import typer
 from rich.console import Console
 from rich.table import Table
 
+from pushtoknow.cli.options import SEED_HELP, seed_option, sigma_points_option
 from pushtoknow.common.errors import IdentificationError, PushToKnowError
+from pushtoknow.testbed.push import PROFILES
+
+ProfileName = enum.Enum("ProfileName", {p: p for p in PROFILES}, type=str)  # CLI choices
 
 app = typer.Typer(
     add_completion=False,
@@ -26,6 +32,23 @@ app.add_typer(dataset_app, name="dataset")
 app.add_typer(bench_app, name="bench")
 console = Console()
 err_console = Console(stderr=True, soft_wrap=True)
+
+
+def _version(value: bool) -> None:
+    if value:
+        from pushtoknow import __version__
+
+        print(f"pushtoknow {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _main_options(
+    version: bool = typer.Option(
+        False, "--version", callback=_version, is_eager=True, help="print the version and exit"
+    ),
+) -> None:
+    """Learn an object's mass, friction, CoM and inertia by pushing it."""
 
 
 PROFILES_HELP = (
@@ -47,8 +70,6 @@ def _save_and_print_json(data: dict, out: Path | None, as_json: bool) -> bool:
 
 def _profiles(text: str) -> tuple[str, ...]:
     """'constant,release' → ("constant", "release"), each checked."""
-    from pushtoknow.testbed.push import PROFILES
-
     names = tuple(p.strip() for p in text.split(",") if p.strip())
     bad = [p for p in names if p not in PROFILES]
     if not names or bad:
@@ -68,7 +89,7 @@ def simulate(
     out: Path = typer.Option(..., "--out", help="output directory (resumed if it exists)"),
     objects: int = typer.Option(4, "--objects", min=1),
     pushes: int = typer.Option(2, "--pushes", min=1, help="pushes per object"),
-    seed: int = typer.Option(0, "--seed"),
+    seed: int = seed_option(),
     workers: int = typer.Option(1, "--workers", min=1),
     objects_from: str = typer.Option(
         "catalogue",
@@ -115,6 +136,11 @@ def dataset_info_cmd(root: Path, as_json: bool = typer.Option(False, "--json")):
         info = dataset_info(root)
     except PushToKnowError as e:
         _fail(e)
+    if info["complete"] is False:
+        err_console.print(
+            f"[bold yellow]incomplete:[/] {info['objects']} of {info['expected_objects']} objects "
+            "written (an interrupted run: the same command resumes it)"
+        )
     if as_json:
         print(json.dumps(info))
         return
@@ -184,7 +210,7 @@ def bench_active(
     as_json: bool = typer.Option(False, "--json"),
     seed: int = 0,
     candidates: int = typer.Option(16, "--candidates"),
-    sigma_points: int = typer.Option(100, "--sigma-points"),
+    sigma_points: int = sigma_points_option(100, "sigma points (≥ 10)"),
 ):
     """One active push decision: M candidates, N = 50% of the horizon, C sigma points; prints
     decision_s_median per score (kl, entropy)."""
@@ -197,10 +223,12 @@ def bench_active(
 @app.command("evaluate-heldout")
 def evaluate_heldout_cmd(
     model: str = typer.Option("pretrained", "--model"),
-    objects: int = typer.Option(88, "--objects", help="held-out catalogue objects (≤ 88)"),
+    objects: int = typer.Option(
+        88, "--objects", min=1, max=88, help="held-out catalogue objects (≤ 88)"
+    ),
     pushes: int = typer.Option(5, "--pushes", min=1),
     policy: str = typer.Option("uniform", "--policy"),
-    seed: int = typer.Option(0, "--seed"),
+    seed: int = seed_option(),
     workers: int = typer.Option(2, "--workers", min=1),
     out: Path = typer.Option(None, "--out", help="write the metrics JSON here"),
     as_json: bool = typer.Option(False, "--json"),
@@ -288,11 +316,11 @@ def ablate_profiles_cmd(
         None, "--reference", help="also run this model (e.g. pretrained) uniform, constant"
     ),
     folds: int = typer.Option(4, "--folds", min=2),
-    seed: int = typer.Option(0, "--seed"),
+    seed: int = seed_option(),
     workers: int = typer.Option(2, "--workers", min=1),
     markdown: Path = typer.Option(None, "--markdown", help="write the RESULTS.md section here"),
 ):
-    """Speed-profile ablation (issue 5 (c)): NRMSE of m, μ, I_z (and the rest) after K pushes
+    """Speed-profile ablation: NRMSE of m, μ, I_z (and the rest) after K pushes
     when the policy may or may not use release pushes, on the same held-out objects."""
     from rich.progress import Progress
 
@@ -347,7 +375,7 @@ def evaluate_cmd(
     folds: int = typer.Option(None, "--folds", min=2, help="default: the config's (5)"),
     out: Path = typer.Option(..., "--out", help="report folder: results.json, RESULTS.md, figures"),
     config: Path = typer.Option(None, "--config", help="YAML EvaluationConfig"),
-    seed: int = typer.Option(None, "--seed"),
+    seed: int = seed_option(None, "default: the config's; " + SEED_HELP),
     workers: int = typer.Option(None, "--workers", min=1),
     append: list[Path] = typer.Option(
         [], "--append", help="markdown file appended to RESULTS.md (e.g. estimate-real's)"
@@ -443,8 +471,8 @@ def import_mit(
 @app.command("push")
 def push_cmd(
     obj: str = typer.Option("catalogue:0", "--object", help="catalogue:ID or a JSON/YAML spec"),
-    profile: str = typer.Option("constant", "--profile"),
-    seed: int = typer.Option(0, "--seed"),
+    profile: ProfileName = typer.Option(ProfileName.constant, "--profile", help="speed profile"),
+    seed: int = seed_option(),
     out: Path = typer.Option(Path("push.png"), "--out", help="frame strip + force plot PNG"),
     as_json: bool = typer.Option(False, "--json"),
 ):
@@ -454,10 +482,10 @@ def push_cmd(
 
     try:
         spec = load_object_spec(obj)
-        rec, camera = one_push(spec, profile, seed)
+        rec, camera = one_push(spec, profile.value, seed)
     except PushToKnowError as e:
         _fail(e)
-    save_push_strip(rec, camera, out, title=f"{spec.name} ({profile})")
+    save_push_strip(rec, camera, out, title=f"{spec.name} ({profile.value})")
     summary = _push_summary(spec, rec)
     if as_json:
         print(json.dumps(summary))
@@ -512,7 +540,7 @@ def train(
     out: Path = typer.Option(..., "--out", help="run directory to write"),
     variant: str = typer.Option("vt-addf", "--variant", help="vt-addf | vt-jdf | v-ddf"),
     config: Path = typer.Option(None, "--config", help="YAML TrainConfig"),
-    seed: int = typer.Option(0, "--seed"),
+    seed: int = seed_option(),
     visnet_from: Path = typer.Option(
         None, "--visnet-from", help="reuse the VisNet of this run instead of training one"
     ),
@@ -674,10 +702,10 @@ def infer(
     policy: str = typer.Option(
         "uniform", "--policy", help="uniform | random | active-kl | active-entropy"
     ),
-    seed: int = typer.Option(0, "--seed"),
+    seed: int = seed_option(),
     out: Path = typer.Option(Path("infer-out"), "--out", help="where the plot and JSON go"),
     as_json: bool = typer.Option(False, "--json", help="print the estimates as JSON"),
-    sigma_points: int = typer.Option(None, "--sigma-points", help="default: the model's (100)"),
+    sigma_points: int = sigma_points_option(help="default: the model's (100)"),
     profiles: str = typer.Option(None, "--profiles", help=PROFILES_HELP),
 ):
     """Push an object K times on the testbed and estimate its parameters after every push."""
@@ -697,7 +725,7 @@ def infer(
 @app.command()
 def demo(
     out: Path = typer.Option(Path("demo-out"), "--out"),
-    seed: int = typer.Option(0, "--seed"),
+    seed: int = seed_option(),
     model: str = typer.Option("pretrained", "--model"),
     pushes: int = typer.Option(5, "--pushes", min=1),
 ):
@@ -718,7 +746,7 @@ def collect(
     ),
     objects: int = typer.Option(4, "--objects", min=1),
     pushes: int = typer.Option(2, "--pushes", min=1, help="pushes per object"),
-    seed: int = typer.Option(0, "--seed"),
+    seed: int = seed_option(),
     out: Path = typer.Option(..., "--out", help="output directory (resumed if it exists)"),
     objects_from: str = typer.Option(
         "catalogue-train",
@@ -730,7 +758,7 @@ def collect(
     ),
     workers: int = typer.Option(1, "--workers", min=1),
     candidates: int = typer.Option(16, "--candidates", min=1),
-    sigma_points: int = typer.Option(None, "--sigma-points", help="default: the model's"),
+    sigma_points: int = sigma_points_option(),
 ):
     """Collect training data with a push policy and a trained model (the filter runs, so active
     policies choose each push for the current belief); writes shards like `simulate`."""
@@ -766,21 +794,21 @@ def collect(
 def ablate_efficiency(
     config: Path = typer.Option(..., "--config", help="YAML EfficiencyConfig"),
     out: Path = typer.Option(..., "--out", help="ablation folder (resumed if it exists)"),
-    seed: int = typer.Option(0, "--seed", help="base seed: replicates use seed + config seeds"),
+    seed: int = seed_option(help="base seed (≥ 0): replicates use seed + config seeds"),
     workers: int = typer.Option(None, "--workers", min=1, help="default: the config's"),
     as_json: bool = typer.Option(False, "--json", help="print efficiency.json to stdout"),
 ):
     """Learning efficiency (paper Fig. 4b): validation loss versus training pushes for data
     collected with each policy, over seeds; writes efficiency.json/.csv/.png."""
-    from pydantic import ValidationError
-
     from pushtoknow.collection.efficiency import EfficiencyConfig, figure_series, run_efficiency
     from pushtoknow.evaluation.figures import plot_learning_efficiency
 
     try:
         cfg = EfficiencyConfig.from_yaml(config)
-    except (OSError, ValidationError) as e:
-        _fail(ValueError(f"{config}: {e}"))
+    except OSError as e:
+        _fail(ValueError(f"{config}: {e.strerror}"))
+    except PushToKnowError as e:
+        _fail(e)
     try:
         results = run_efficiency(
             cfg, out, seed, workers, log=lambda m: err_console.print(f"[dim]efficiency[/] {m}")
@@ -863,7 +891,7 @@ def identify_cmd(
         None, "--object", help="index of the object in the dataset (default: every object)"
     ),
     max_pushes: int = typer.Option(None, "--max-pushes", min=1, help="use the first K pushes"),
-    seed: int = typer.Option(0, "--seed"),
+    seed: int = seed_option(),
     workers: int = typer.Option(2, "--workers", min=1, help="processes for the rollouts"),
     config: Path = typer.Option(None, "--config", help="IdentifyConfig YAML"),
     as_json: bool = typer.Option(False, "--json", help="print the estimates as JSON"),
@@ -933,7 +961,7 @@ def identify_bench_cmd(
     profiles: str = typer.Option(
         "constant,release", "--profiles", help="profiles taken in turn, push by push"
     ),
-    seed: int = typer.Option(0, "--seed"),
+    seed: int = seed_option(),
     workers: int = typer.Option(2, "--workers", min=1),
     out: Path = typer.Option(None, "--out", help="write the results JSON here"),
     as_json: bool = typer.Option(False, "--json", help="print the results JSON"),
@@ -972,9 +1000,23 @@ def identify_bench_cmd(
     console.print(f"not identified (objects): {res['unidentified'] or 'none'}")
 
 
-def main() -> None:  # pragma: no cover
+def error_message(e: BaseException) -> str | None:
+    """The one-line message of an error a user can cause (bad input, files, disk), or None
+    for a bug (which keeps its traceback)."""
+    if isinstance(e, PushToKnowError):
+        return str(e)
+    if isinstance(e, OSError) and e.strerror:
+        where = f"{e.filename}: " if e.filename else ""
+        return f"{where}{e.strerror.lower()}"
+    return None
+
+
+def main() -> None:  # pragma: no cover - the installed entry point; tests call it in process
     try:
         app()
-    except PushToKnowError as e:
-        err_console.print(f"[bold red]error:[/] {e}")
+    except Exception as e:
+        message = error_message(e)
+        if message is None:
+            raise
+        err_console.print(f"[bold red]error:[/] {message}")
         sys.exit(2)

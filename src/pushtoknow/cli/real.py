@@ -13,6 +13,7 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
+from pushtoknow.cli.options import seed_option, sigma_points_option
 from pushtoknow.common.errors import PushToKnowError
 
 console = Console()
@@ -27,13 +28,11 @@ def estimate_real(
     forest_data: Path = typer.Option(
         ..., "--forest-data", help="simulated dataset (`pushtoknow simulate`) to fit the forest on"
     ),
-    seed: int = typer.Option(0, "--seed"),
+    seed: int = seed_option(),
     obj: str | None = typer.Option(
         None, "--object", help="SHAPE or SURFACE:SHAPE when DATA_DIR holds several objects"
     ),
-    sigma_points: int | None = typer.Option(
-        None, "--sigma-points", help="default: the model's", min=10
-    ),
+    sigma_points: int | None = sigma_points_option(),
     trees: int = typer.Option(200, "--trees", min=1, help="random-forest trees"),
     rescale: bool = typer.Option(
         True,

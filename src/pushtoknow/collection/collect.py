@@ -1,5 +1,5 @@
 """Training-data collection with a push policy and the current model (`pushtoknow collect`), and
-the union of several datasets for training (SPEC §3.5, §3.6).
+the union of several datasets for training (docs/DESIGN.md §7, §8).
 
 `collect_dataset` pushes each object K times with `inference.session.infer_object`, i.e. with
 the trained model's filter running and the parameter belief carried from push to push, so an

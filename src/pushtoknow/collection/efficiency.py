@@ -1,5 +1,5 @@
 """Learning efficiency of the data-collection policies (`pushtoknow ablate-efficiency`; the
-paper's Fig. 4b, SPEC §3.6): validation loss versus the number of training pushes when the
+paper's Fig. 4b, docs/DESIGN.md §8): validation loss versus the number of training pushes when the
 training data grow by pushes chosen uniformly, at random or actively.
 
 Per replicate seed s (the run's `--seed` plus each of `seeds`):

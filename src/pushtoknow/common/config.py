@@ -6,7 +6,9 @@ from pathlib import Path
 from typing import TypeVar
 
 import yaml
-from pydantic import BaseModel, ConfigDict
+from pydantic import BaseModel, ConfigDict, ValidationError
+
+from pushtoknow.common.errors import ConfigError
 
 T = TypeVar("T", bound="Config")
 
@@ -18,9 +20,24 @@ class Config(BaseModel):
 
     @classmethod
     def from_yaml(cls: type[T], path: str | Path) -> T:
+        """Load and validate. Raises ConfigError naming the file and every bad field (and
+        OSError when the file cannot be read)."""
         with open(path) as f:
-            data = yaml.safe_load(f) or {}
-        return cls.model_validate(data)
+            try:
+                data = yaml.safe_load(f) or {}
+            except yaml.YAMLError as e:
+                where = getattr(e, "problem_mark", None)
+                line = f" (line {where.line + 1})" if where is not None else ""
+                raise ConfigError(path, f"not valid YAML{line}") from None
+        if not isinstance(data, dict):
+            raise ConfigError(path, f"expected a mapping of settings, got {type(data).__name__}")
+        try:
+            return cls.model_validate(data)
+        except ValidationError as e:
+            problems = "; ".join(
+                f"{'.'.join(map(str, err['loc'])) or '(root)'}: {err['msg']}" for err in e.errors()
+            )
+            raise ConfigError(path, f"invalid {cls.__name__}: {problems}") from None
 
     def to_yaml(self, path: str | Path) -> None:
         Path(path).write_text(yaml.safe_dump(self.model_dump(mode="json"), sort_keys=False))

@@ -21,6 +21,15 @@ class DatasetError(PushToKnowError):
         super().__init__(f"{path}: {problem}")
 
 
+class ConfigError(PushToKnowError, ValueError):
+    """A configuration file is not valid YAML or not a valid config; the message names the
+    file and each offending field."""
+
+    def __init__(self, path: object, problem: str):
+        self.path, self.problem = path, problem
+        super().__init__(f"{path}: {problem}")
+
+
 class RenderingUnavailableError(PushToKnowError, RuntimeError):
     """Headless OpenGL could not be initialised."""
 

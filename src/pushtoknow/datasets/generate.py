@@ -20,6 +20,7 @@ from pydantic import Field
 from pushtoknow.common.config import Config
 from pushtoknow.common.errors import DatasetError, ObjectSpecError
 from pushtoknow.datasets.shards import (
+    GENERATION_FILE,
     ObjectEpisode,
     shard_is_finished,
     shard_path,
@@ -36,8 +37,6 @@ from pushtoknow.testbed.objects import (
     sample_continuous_object,
 )
 from pushtoknow.testbed.push import Push
-
-GENERATION_FILE = "generation.json"
 
 
 class GenerationConfig(Config):

@@ -1,4 +1,5 @@
-"""Convert MIT Push recordings into the project's HDF5 shards, with synthetic RGB-D (SPEC §3.9).
+"""Convert MIT Push recordings into the project's HDF5 shards, with synthetic RGB-D (docs/DESIGN.md
+§11).
 
 The MIT Push dataset has no images. As the paper did, every 10 Hz sample is *rendered* with the
 testbed's MuJoCo scene: the object is placed at its recorded pose and the pad at the recorded
@@ -122,7 +123,7 @@ IMPORT_VERSION = 2
 SOURCE_TAG = "mit-push"
 MIT_HEIGHT = DEFAULT_HEIGHT  # m, 13 mm stainless steel plates
 # μ placeholder when no push of an object gives a valid estimate: the middle of the catalogue's
-# μ grid (SPEC §3.1). Not a measurement; flagged as friction_source = "fallback".
+# μ grid (docs/DESIGN.md §3). Not a measurement; flagged as friction_source = "fallback".
 FALLBACK_FRICTION = 0.5
 FRICTION_VALID_RANGE = (0.01, 2.0)  # estimates outside are rejected (ObjectSpec needs μ ≤ 2)
 MIN_DIRECTION_DISPLACEMENT = 1e-3  # m of tip travel needed to define a push direction

@@ -1,4 +1,4 @@
-"""Reader for the MIT Push dataset (Yu, Bauza, Fazeli, Rodriguez, IROS 2016), SPEC §3.9.
+"""Reader for the MIT Push dataset (Yu, Bauza, Fazeli, Rodriguez, IROS 2016), docs/DESIGN.md §11.
 
 Files are named ``motion_surface=<s>_shape=<o>_a=<acc>_v=<mm/s>_i=<side>_s=<pos>_t=<angle>``
 with suffix ``.json`` or ``.h5``. Each holds three tables of rows [t, ., ., .] (t in Unix s):
@@ -28,8 +28,8 @@ What the reader does (`read_mit_push`), in order:
    tared mean reading over the push points 180.4° away from the pusher's motion. In object axes
    it would be 92° off. They are the force the *object exerts on the probe*. `MitPush.force` is
    their negative, the force the pusher applies to the object, as the simulator's tactile
-   sensor reports it (SPEC §3.1). The probe's own frame cannot be told apart from the world's
-   here, because its yaw stays ~0.
+   sensor reports it (docs/DESIGN.md §3). The probe's own frame cannot be told apart from the
+   world's here, because its yaw stays ~0.
 5. **Resample to a common clock** at ``rate`` Hz (default 10), with the simulator's tactile
    timing (`pushtoknow.testbed.sim`): the common span is the intersection [t_start, t_end] of
    the three streams. There are K = floor((t_end - t_start)·rate + `SAMPLE_COUNT_TOLERANCE`)
@@ -49,9 +49,9 @@ What the reader does (`read_mit_push`), in order:
    `MitPush.force_samples` counts the raw samples of each window (0: interpolated). Raw force
    samples after t_{K-1} are not used. Times are re-zeroed: ``times = k / rate``; ``t0`` keeps
    the Unix time of t_start.
-6. **Object frame.** `MitPush.object_pose` is the pose of the footprint centroid (SPEC §2). For
-   the triangles the dataset's frame is not at the centroid (see `mit_object`); the raw poses
-   stay in `MitPush.raw`.
+6. **Object frame.** `MitPush.object_pose` is the pose of the footprint centroid (docs/DESIGN.md
+   §2). For the triangles the dataset's frame is not at the centroid (see `mit_object`); the raw
+   poses stay in `MitPush.raw`.
 7. **Contact** is ‖force‖ > `CONTACT_FORCE_THRESHOLD` (0.5 N) on the window-averaged force, so
    contact[k] refers to the window ending at t_k. Noise at rest averages to < 0.1 N, while
    pushing rect1 on plywood gives > 1.5 N.
@@ -117,7 +117,7 @@ NAME_PATTERN = "motion_surface=<s>_shape=<o>_a=<acc>_v=<mm/s>_i=<side>_s=<pos>_t
 MM_PER_M = 1000.0
 
 # --- processing ------------------------------------------------------------------------------
-DEFAULT_RATE_HZ = 10.0  # the filter's rate (SPEC §3.1)
+DEFAULT_RATE_HZ = 10.0  # the filter's rate (docs/DESIGN.md §3)
 # In samples: absorbs float64 rounding of Unix timestamps (2.4e-7 s at 1.5e9 s), so a span that
 # is nominally an integer number of periods is not one sample short.
 SAMPLE_COUNT_TOLERANCE = 1e-4
@@ -129,7 +129,7 @@ YAW_JUMP_WARNING = 0.5  # rad between consecutive raw object samples
 SPEED_MATCH_TOLERANCE = 5e-4  # m/s (half of the file name's 1 mm/s resolution)
 ACCELERATION_MATCH_TOLERANCE = 1e-9
 
-# --- objects (SPEC §3.1, §3.9) ---------------------------------------------------------------
+# --- objects (docs/DESIGN.md §3, §11) ---
 PUSHER_RADIUS = 4.745e-3  # m, point probe
 ELLIPSE_VERTICES = 64
 # Triangles: the dataset frame sits this far inside both legs from the right-angle corner
@@ -296,8 +296,8 @@ def mit_polygon(
 ) -> np.ndarray:
     """Footprint of a MIT shape as a (V, 2) counter-clockwise polygon in metres.
 
-    frame="centroid" (default) centres it on the footprint centroid (SPEC §2). frame="dataset"
-    gives it in the dataset's object frame, the frame of the raw ``object_pose``.
+    frame="centroid" (default) centres it on the footprint centroid (docs/DESIGN.md §2).
+    frame="dataset" gives it in the dataset's object frame, the frame of the raw ``object_pose``.
     Ellipses are sampled at `ellipse_vertices` points on the ellipse.
     """
     _check_shape(shape)
@@ -311,7 +311,7 @@ def mit_polygon(
 
 @cache
 def mit_object(shape: str) -> MitObject:
-    """Catalogue entry of a MIT shape: masses and I_z from SPEC §3.9, footprints from §3.1.
+    """Catalogue entry of a MIT shape: masses and I_z from docs/DESIGN.md §11, footprints from §3.
 
     Frames: rectangles, ellipses (semi-axis 0.0525 m along x) and the hexagon (a vertex on +x)
     are centred in the dataset frame. The right triangles are not. The dataset frame has its
@@ -323,7 +323,7 @@ def mit_object(shape: str) -> MitObject:
     (45.05, 45.07) mm). It could not be checked on the sample files, which are all rect1.
     The stated I_z values match a uniform plate on these footprints about the centroid within
     0.2%, which supports "CoM at the centroid".
-    butter is not the rounded convex shape SPEC §3.1 suggests. It is a non-convex "peanut"
+    butter is not the rounded convex shape docs/DESIGN.md §3 suggests. It is a non-convex "peanut"
     0.0955 m wide (waist 0.0549 m) and 0.156 m long, approximated by an 84-vertex polygon
     traced from the MIT outline. Its area gives the stated mass within 0.2% and I_z within 1%
     at the density of rect1. A 0.095 m rounded rectangle would be 30% too light.

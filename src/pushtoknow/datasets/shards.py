@@ -32,6 +32,7 @@ from pushtoknow.testbed.sim import PushRecord
 
 SCHEMA_VERSION = 1
 SHARD_GLOB = "shard-*.h5"
+GENERATION_FILE = "generation.json"  # a generated dataset's provenance: its config and plan
 RUN_PUSHES = "pushes"  # subfolder of an `infer` / `demo` output holding the executed pushes
 COMPRESSION = {"compression": "gzip", "compression_opts": 4, "shuffle": True}
 
@@ -198,7 +199,8 @@ def list_shards(root: Path) -> list[Path]:
 
 def dataset_info(root: Path) -> dict:
     """Summary of a dataset directory: schema_version, testbed_version (the physics the pushes
-    were simulated with, docs/PHYSICS.md), shards, objects, pushes, steps, bytes."""
+    were simulated with, docs/PHYSICS.md), shards, objects, expected_objects and complete (from
+    its GENERATION_FILE; None without one), pushes, steps, bytes."""
     shards = list_shards(root)
     if not shards:
         raise DatasetError(root, f"no {SHARD_GLOB} files")
@@ -217,12 +219,21 @@ def dataset_info(root: Path) -> dict:
                     prof = str(p.attrs["profile"])
                     profiles[prof] = profiles.get(prof, 0) + 1
                     image_shape = list(p["rgb"].shape[1:])
+    expected = None
+    gen_file = Path(root) / GENERATION_FILE
+    if gen_file.exists():
+        try:
+            expected = int(json.loads(gen_file.read_text())["config"]["objects"])
+        except (json.JSONDecodeError, KeyError, TypeError, ValueError):
+            raise DatasetError(gen_file, "unreadable provenance record") from None
     return {
         "schema_version": SCHEMA_VERSION,
         "testbed_version": max(testbed_versions),
         "path": str(root),
         "shards": len(shards),
         "objects": objects,
+        "expected_objects": expected,
+        "complete": None if expected is None else objects >= expected,
         "pushes": pushes,
         "steps": steps,
         "profiles": profiles,

@@ -1,1 +1,1 @@
-"""Metrics and evaluation protocols (SPEC §3.7)."""
+"""Metrics and evaluation protocols (docs/DESIGN.md §9)."""

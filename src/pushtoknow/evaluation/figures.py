@@ -1,4 +1,5 @@
-"""The paper's figures from plain data (SPEC §3.7): Fig. 4 (learning curves, learning efficiency),
+"""The paper's figures from plain data (docs/DESIGN.md §9): Fig. 4 (learning curves, learning
+efficiency),
 Fig. 5 (estimates versus push number), NRMSE versus number of pushes and a calibration plot.
 
 Every function takes numbers (numpy arrays, lists of tuples, dicts), writes one PNG and keeps no

@@ -1,5 +1,5 @@
 """Accuracy on held-out objects: K inference pushes on each, NRMSE after every push, coverage of
-the intervals, the prior-mean predictor beside it (SPEC §3.7).
+the intervals, the prior-mean predictor beside it (docs/DESIGN.md §9).
 
 `pushtoknow evaluate-heldout` (and docs/RESULTS.md) use `evaluate_heldout`; objects are run in
 parallel processes, each seeded by (seed, object id), so results do not depend on `workers`.

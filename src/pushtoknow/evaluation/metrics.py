@@ -1,4 +1,4 @@
-"""NRMSE, interval coverage and the prior-mean predictor (SPEC §3.7).
+"""NRMSE, interval coverage and the prior-mean predictor (docs/DESIGN.md §9).
 
 NRMSE = RMSE / (max − min of the parameter over the setup's catalogue); overall = the mean of the
 five per-parameter values. Coverage = share of objects whose truth lies in the central Gaussian
@@ -35,7 +35,7 @@ def nrmse(pred: np.ndarray, truth: np.ndarray) -> dict[str, float]:
 def product_nrmse(
     pred: np.ndarray, truth: np.ndarray, pred_product: np.ndarray | None = None
 ) -> float:
-    """NRMSE of μ·m (the quantity quasi-static force reveals, SPEC §3.8), normalised by the
+    """NRMSE of μ·m (the quantity quasi-static force reveals, docs/DESIGN.md §10), normalised by the
     catalogue range of the product. pred_product (N,): the predicted μ·m when the predictor
     gives it directly (e.g. a Gaussian belief's E[μ·m] = μ̄·m̄ + Cov(μ, m)); else the product
     of pred's mass and friction columns."""

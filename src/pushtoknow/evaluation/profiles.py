@@ -1,4 +1,4 @@
-"""Speed-profile ablation (issue 5 (c), SPEC §3.8): do dynamic pushes separate m from μ?
+"""Speed-profile ablation (docs/DESIGN.md §10): do dynamic pushes separate m from μ?
 
 Constant 20 mm/s pushes are quasi-static: the force reveals μ·m only. A *release* push
 accelerates the object (F − μ·m·g = m·a) and lets it slide free (deceleration μ·g, whatever
@@ -138,7 +138,7 @@ def profiles_markdown(report: dict, command: str) -> str:
     first = next(iter(conds.values()))
     prior = first["prior_nrmse"]
     lines = [
-        "## Speed profiles: do dynamic pushes separate m from μ? (issue 5 (c))",
+        "## Speed profiles: do dynamic pushes separate m from μ?",
         "",
         f"One VT-ADDF trained on pushes of both profiles (constant 20 mm/s; release: 0.5 m/s² "
         f"to 0.4 m/s, then the pad stops and the object slides free), {n} held-out catalogue "

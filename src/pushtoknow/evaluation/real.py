@@ -1,4 +1,4 @@
-"""Estimates on real pushes (MIT Push, SPEC §3.9) against an object's known parameters.
+"""Estimates on real pushes (MIT Push, docs/DESIGN.md §11) against an object's known parameters.
 
 `estimate_real_object` takes a dataset directory written by ``pushtoknow import-mit`` (one
 object = one shape on one surface, with its converted pushes in file order), or a folder of raw
@@ -26,9 +26,9 @@ MIT Push files, and reports:
   the simulated pushes in `forest_data` (ground-truth poses), predicting from the real pushes'
   features computed from the recorded (motion-capture) poses: the ground-truth-pose variant.
   After k pushes: the mean of the first k per-push predictions (`ForestBaseline.predict_object`).
-- **Prior-mean predictor**: the mean parameters of the objects in `forest_data` (SPEC §3.7).
-- **Reference truth.** mass and I_z from the MIT catalogue (`mit_object`, SPEC §3.9), CoM at
-  the footprint centroid, (0, 0). The dataset gives no friction, so the reference μ is
+- **Prior-mean predictor**: the mean parameters of the objects in `forest_data` (docs/DESIGN.md §9).
+- **Reference truth.** mass and I_z from the MIT catalogue (`mit_object`, docs/DESIGN.md §11), CoM
+  at the footprint centroid, (0, 0). The dataset gives no friction, so the reference μ is
   measured from the pushes that are *pure translations*: |Δθ| < `PURE_TRANSLATION_DEG` (2°)
   between the first and the last sample. It is ``mean ‖F‖ / (m·g)`` over the **contact phase**
   of those pushes, pooled: every sample from the first to the last one in contact (tactile
@@ -45,8 +45,8 @@ MIT Push files, and reports:
 - **Errors**: the normalised error |estimate − truth| / (max − min of the parameter over the
   catalogue), the NRMSE of a single object (`evaluation.metrics.param_ranges`), per parameter,
   for the filter and the forest after every push and for the prior mean; ``overall`` = mean over
-  the parameters with a truth. Also E[μ·m] (SPEC §3.8: quasi-static force reveals only μ·m),
-  normalised by the range of μ·m over the catalogue.
+  the parameters with a truth. Also E[μ·m] (docs/DESIGN.md §10: quasi-static force reveals only
+  μ·m), normalised by the range of μ·m over the catalogue.
 
 Honest caveats (in ``notes`` of the report): the real object is not a catalogue object (its
 mass and I_z lie inside the catalogue's ranges, not on the grid; plywood's μ ≈ 0.29 is below
@@ -89,6 +89,7 @@ __all__ = [
 ]
 
 PURE_TRANSLATION_DEG = 2.0  # |Δθ| below this over a push: a pure translation
+MIN_SLIDE = 0.01  # m: a push whose object travelled less did not really slide (a glancing push)
 # Push speed of the training data when the checkpoint does not record it (as `infer_object`):
 # the simulator's default constant speed, that of the shipped model's data.
 DEFAULT_TRAINING_SPEED = PushConfig().speed  # m/s
@@ -105,8 +106,8 @@ REPORT_KEYS = (
     "friction_reference",
     "filter",
     "forest",
-    "prior_mean",
     "identify",
+    "prior_mean",
     "errors",
     "mu_m",
     "ranges",
@@ -252,24 +253,32 @@ def _contact_phase_force(rec) -> np.ndarray:
 
 
 def friction_reference(
-    records, mass: float, max_rotation_deg: float = PURE_TRANSLATION_DEG
+    records,
+    mass: float,
+    max_rotation_deg: float = PURE_TRANSLATION_DEG,
+    min_travel: float = MIN_SLIDE,
 ) -> dict:
-    """Reference μ from the pure translations among `records` (module doc, "Reference truth").
+    """Reference μ from the pure translations among `records` (module doc, "Reference truth"):
+    pushes that turned the object by less than `max_rotation_deg` while moving it at least
+    `min_travel` (m; a glancing push that barely moved it balanced less than the full sliding
+    friction).
 
-    Returns {"value": μ or None, "rule": text, "pushes": [{"rotation_deg", "pure_translation",
-    "mu_contact_phase" (that push's own mean ‖F‖/(m·g), None without contact),
-    "contact_samples"}]}.
+    Returns {"value": μ or None, "rule": text, "pushes": [{"rotation_deg", "travel_m",
+    "pure_translation", "mu_contact_phase" (that push's own mean ‖F‖/(m·g), None without
+    contact), "contact_samples"}]}.
     """
     per, pooled = [], []
     for rec in records:
         rot = math.degrees(float(rec.pose[-1, 2] - rec.pose[0, 2]))
+        travel = float(np.hypot(*(rec.pose[-1, :2] - rec.pose[0, :2])))
         f = _contact_phase_force(rec)
-        pure = abs(rot) < max_rotation_deg and f.size > 0
+        pure = abs(rot) < max_rotation_deg and travel >= min_travel and f.size > 0
         if pure:
             pooled.append(f)
         per.append(
             {
                 "rotation_deg": rot,
+                "travel_m": travel,
                 "pure_translation": bool(pure),
                 "mu_contact_phase": float(f.mean() / (mass * GRAVITY)) if f.size else None,
                 "contact_samples": int(f.size),
@@ -278,7 +287,8 @@ def friction_reference(
     value = float(np.concatenate(pooled).mean() / (mass * GRAVITY)) if pooled else None
     rule = (
         f"mean |F| / (m g) over the contact phase (first to last contact sample) of the pushes "
-        f"with |rotation| < {max_rotation_deg} deg (pure translations), samples pooled"
+        f"with |rotation| < {max_rotation_deg} deg that moved the object ≥ {min_travel * 1e3:g} "
+        "mm (pure translations that slid), samples pooled"
     )
     return {"value": value, "rule": rule, "pushes": per}
 

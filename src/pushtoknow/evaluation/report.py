@@ -248,7 +248,7 @@ def render_report(results: dict, command: str, appendices: list[str] = ()) -> st
 
 
 def efficiency_markdown(results: dict, command: str, figure: str = "efficiency.png") -> str:
-    """The learning-efficiency section (issue 5 (a)) from `ablate-efficiency`'s
+    """The learning-efficiency section from `ablate-efficiency`'s
     efficiency.json: validation NLL and RMSE (mean ± std over seeds) per collection policy
     versus the number of training pushes."""
     lines = [

@@ -1,4 +1,4 @@
-"""The evaluation suite behind `pushtoknow evaluate` (SPEC §3.7).
+"""The evaluation suite behind `pushtoknow evaluate` (docs/DESIGN.md §9).
 
 Protocol (what each number means):
 

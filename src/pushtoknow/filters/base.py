@@ -33,7 +33,7 @@ class FilterConfig(Config):
     """Configuration shared by the dual and joint filters.
 
     pose_dim, param_dim: sizes of ψ and φ̃; pose_angle_indices: angle components of ψ.
-    num_sigma_points: C Monte-Carlo sigma points (SPEC: 100 at inference).
+    num_sigma_points: C Monte-Carlo sigma points (100 at inference, docs/DESIGN.md §6).
     antithetic_noise: use the first C/2 draws of each step and their negatives (odd sample
       moments vanish: no skew error in the importance-weighted update). Needs C ≥ 2n.
     moment_matched_noise: then standardise the draws to exactly zero mean and identity 1/C
@@ -41,13 +41,13 @@ class FilterConfig(Config):
       (C ≥ 2n with antithetic pairs). n = D + pose_dim in the prediction (state and process
       noise are standardised jointly), param_dim in the dual update; where C is too small
       the step is skipped (`BeliefFilter.prepare_noise`).
-    liu_west_h: kernel bandwidth h (a = √(1 - h²)), SPEC default 0.01.
+    liu_west_h: kernel bandwidth h (a = √(1 - h²)), the paper's 0.01.
     ess_min_fraction, max_tempering_stages: effective-sample-size guard of the dual update
       (see `DualFilter`); max_tempering_stages = 1 switches the guard off.
-    param_weighting: "marginal" (default, pose integrated out) or "joint_samples" (SPEC
+    param_weighting: "marginal" (default, pose integrated out) or "joint_samples" (the paper's
       literal): the dual filter's parameter weights, see `DualFilter`.
-    cross_covariance: "updated" (default) or "kept" (SPEC literal): the dual filter's joint
-      reassembly, see `DualFilter`.
+    cross_covariance: "updated" (default) or "kept" (the paper's literal form): the dual filter's
+      joint reassembly, see `DualFilter`.
     sigma_points: Merwe parameters of the UKF updates. cholesky: jitter schedule.
     """
 
@@ -132,7 +132,8 @@ class UpdateInfo:
 
 class BeliefFilter(nn.Module):
     """Base of the Gaussian-belief filters: holds the models and implements the shared
-    constrained Monte-Carlo prediction (SPEC §3.4 steps 1–2). Subclasses implement `update`."""
+    constrained Monte-Carlo prediction (docs/DESIGN.md §6 steps 1–2). Subclasses implement
+    `update`."""
 
     uses_update_noise: bool = True  # whether `update` draws random numbers
 
@@ -172,7 +173,7 @@ class BeliefFilter(nn.Module):
             validate(batch)
 
     def model_input(self, states: torch.Tensor, context: object) -> torch.Tensor:
-        """States as the models may see them: invalid ones projected (SPEC §3.4 step 1)."""
+        """States as the models may see them: invalid ones projected (docs/DESIGN.md §6 step 1)."""
         if self.constraint is None:
             return states
         return self.constraint.project(states, context)
@@ -252,7 +253,8 @@ class BeliefFilter(nn.Module):
         noise: FilterNoise | None = None,
         generator: torch.Generator | None = None,
     ) -> tuple[torch.Tensor, torch.Tensor]:
-        """Predicted belief (mean (B, D), cov (B, D, D)) after one step (SPEC §3.4 steps 1–2).
+        """Predicted belief (mean (B, D), cov (B, D, D)) after one step (docs/DESIGN.md §6 steps
+        1–2).
 
         χ = μ + L ε; the dynamics sees project(χ); χ̄_ψ = χ_ψ + Δψ + √q ε'; χ̄_φ = χ_φ (original
         values, retained even when invalid); moments with weights 1/C.

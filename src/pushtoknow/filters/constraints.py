@@ -1,6 +1,7 @@
 """Physical constraints on sigma points, and the projection used for network inputs only.
 
-SPEC §3.4 step 1 (retain and reintroduce): a sigma point that violates a constraint is never fed
+docs/DESIGN.md §6 step 1 (retain and reintroduce): a sigma point that violates a constraint is
+never fed
 to a model as it is; the model sees `project(point)`. The filter keeps the point's original value
 in every moment, so the spread of the belief is preserved.
 

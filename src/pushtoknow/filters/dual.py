@@ -1,4 +1,4 @@
-"""Dual differentiable filter (paper §III-C, SPEC §3.4): Liu–West parameter update and
+"""Dual differentiable filter (paper §III-C, docs/DESIGN.md §6): Liu–West parameter update and
 conditional UKF pose update on a joint Gaussian belief over s = (ψ, φ̃)."""
 
 from __future__ import annotations
@@ -55,7 +55,7 @@ def regression_slope(
 class DualFilter(BeliefFilter):
     """VT-DDF: one step = constrained Monte-Carlo prediction, then the dual update.
 
-    Update (SPEC §3.4 steps 3–6), predicted belief N(μ̄, Σ̄), observation z, noise R = R(z).
+    Update (docs/DESIGN.md §6 steps 3–6), predicted belief N(μ̄, Σ̄), observation z, noise R = R(z).
     G = Σ̄_ψφ Σ̄_φ⁻¹ and Σ_ψ|φ = Σ̄_ψψ - G Σ̄_φψ describe the predicted N(ψ | φ).
 
     * Parameters (Liu–West): C points φ_j with predicted observations Z_j, log-weights
@@ -65,11 +65,11 @@ class DualFilter(BeliefFilter):
         conditional mean pose ψ̂_j = μ̄_ψ + G (φ_j - μ̄_φ), and R_w = R + P_zz where P_zz is the
         unscented covariance of h(ψ, μ̄_φ) over N(ψ | φ): the pose is integrated out instead of
         sampled. Exact for linear-Gaussian models.
-      - "joint_samples" (SPEC literal): χ'_j ~ N(μ̄, Σ̄), Z_j = h(χ'_j), R_w = R. The sampled
-        pose puts weight noise unrelated to φ into every update: the weighted variance of φ
+      - "joint_samples" (the paper's literal form): χ'_j ~ N(μ̄, Σ̄), Z_j = h(χ'_j), R_w = R. The
+        sampled pose puts weight noise unrelated to φ into every update: the weighted variance of φ
         shrinks by about (1 - 1/ESS) per step and its mean random-walks, so over long runs
         (10²–10⁴ steps) Σ_φ collapses (see tests/filters/test_dual.py).
-      Models see project(point) (SPEC §3.4 step 1).
+      Models see project(point) (docs/DESIGN.md §6 step 1).
     * Effective-sample-size guard (progressive correction): if the weights of the full
       likelihood would have ESS < ess_min_fraction · C, only the tempered likelihood L^β is
       applied, with the largest β keeping ESS = ess_min_fraction · C; the weighted moments
@@ -82,8 +82,8 @@ class DualFilter(BeliefFilter):
       μ_φ)) and noise R.
     * Joint posterior bel(ψ|φ) bel(φ), mean (μ_ψ|φ⁺, μ_φ), covariance per
       `config.cross_covariance`:
-      - "kept" (SPEC §3.4 step 6 / paper, literally): Σ = [[Σ_ψ|φ⁺ + C Σ_φ⁻¹ Cᵀ, C], [Cᵀ, Σ_φ]]
-        with C = Σ̄_ψφ. PSD, but as Σ_φ shrinks the pose variance C Σ_φ⁻¹ Cᵀ grows and the
+      - "kept" (docs/DESIGN.md §6 step 6 / paper, literally): Σ = [[Σ_ψ|φ⁺ + C Σ_φ⁻¹ Cᵀ, C], [Cᵀ,
+        Σ_φ]] with C = Σ̄_ψφ. PSD, but as Σ_φ shrinks the pose variance C Σ_φ⁻¹ Cᵀ grows and the
         ψ–φ correlation tends to ±1; with a precise pose observation that feeds back into
         a collapse of Σ_φ and a diverging pose variance (see tests/filters/test_dual.py).
       - "updated" (default): bel(ψ|φ) keeps its linear dependence on φ through the update,

@@ -112,8 +112,8 @@ def liu_west_moments(
 
     particles (B, C, K), weights (B, C) summing to 1, h ∈ (0, 1) kernel bandwidth, a = √(1 - h²).
     μ = Σ w_j χ_j; V = Σ w_j (χ_j - μ)(χ_j - μ)ᵀ; kernel locations m_j = a χ_j + (1 - a) μ;
-    Σ = Σ w_j (m_j - μ)(m_j - μ)ᵀ + h² V (SPEC §3.4 step 4). Since m_j - μ = a (χ_j - μ), Σ = V:
-    the shrinkage preserves the first two moments, as Liu & West designed it.
+    Σ = Σ w_j (m_j - μ)(m_j - μ)ᵀ + h² V (docs/DESIGN.md §6 step 4). Since m_j - μ = a (χ_j - μ), Σ
+    = V: the shrinkage preserves the first two moments, as Liu & West designed it.
     Returns mean (B, K), cov (B, K, K), kernel locations (B, C, K).
     """
     a = (1.0 - h * h) ** 0.5

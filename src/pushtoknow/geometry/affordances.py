@@ -1,4 +1,4 @@
-"""Push affordances from the initial segmentation S_0 (SPEC §3.2).
+"""Push affordances from the initial segmentation S_0 (docs/DESIGN.md §4).
 
 The mask is smoothed and its 0.5 iso-contour traced with sub-pixel accuracy (contourpy, as used
 by matplotlib); contour points go to the world through the camera model. Outward normals come

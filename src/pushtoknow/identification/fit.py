@@ -9,14 +9,14 @@ fixed μ·m, CoM, log I_z: positive m, μ, I_z by construction, the μ·m ridge 
 
 Search: a closed-form start (μ·m from the steady force of constant pushes, m and μ from the
 acceleration and free slide of release pushes, `testbed.fidelity.read_release`; CoM at the
-centroid, I_z at the prior mean) and `screen_starts` draws from the prior (μ·m kept at the
-closed-form value) are screened with one batched rollout each; the best is refined by
-Levenberg–Marquardt with iteratively reweighted (Huber) Gauss–Newton steps and forward
-difference Jacobians (one batch of 5 rollouts per iteration; the testbed is not chaotic, so
-finite differences are smooth). The next start is refined only if the fit stays poor
-(reduced χ² above `restart_chi2`). Candidates outside the simulable set (CoM within the
-testbed's margin of the edge, I_z below the footprint's bound) are projected onto it and pay a
-penalty residual, so the search stays inside.
+centroid, I_z at the prior mean) and `screen_starts` draws from the prior (μ·m between the
+closed-form value, a lower bound, and `MU_M_START_SPAN` times it) are screened with one batched
+rollout each; the best is refined by Levenberg–Marquardt with iteratively reweighted (Huber)
+Gauss–Newton steps and forward difference Jacobians (one batch of 5 rollouts per iteration; the
+testbed is not chaotic, so finite differences are smooth). The next start is refined only if
+the fit stays poor (reduced χ² above `restart_chi2`). Candidates outside the simulable set (CoM
+within the testbed's margin of the edge, I_z below the footprint's bound) are projected onto it
+and pay a penalty residual, so the search stays inside.
 
 Uncertainty: Laplace at the optimum, combined with the prior: the data information JᵀWJ
 (scaled by the reduced χ² when that exceeds 1) is diagonalised in prior-whitened
@@ -61,8 +61,11 @@ from pushtoknow.testbed.sim import PushRecord
 TRACK_TOLERANCE = 1e-3  # m: a recorded pad track may depart this far from its commanded profile
 PENALTY_SCALE = 1e-3  # m of CoM projection (or 0.1 % of I_z excess) per unit penalty residual
 LEVEL = 0.9
+QUASI_STATIC_SPEED = 0.2  # m/s: constant pushes up to this speed are quasi-static
+QUASI_STATIC_BLIND = [1, 4]  # fit coordinates they do not reveal: log m at fixed μ·m, log I_z
 UNKNOWN_FORCE_NOISE = 0.1  # N: first guess for a recording without a noise level (real data)
 NOISE_FLOOR_SHARE = 1e-2  # an estimated noise level stays above this share of its first guess
+MU_M_START_SPAN = 1.5  # screened starts keep μ·m within [1, this] × the closed form's
 STEADY_AFTER = 1.0  # s: a constant push's force is steady from here (or its contact's middle)
 
 
@@ -351,6 +354,9 @@ def identify(
     t0 = time.perf_counter()
     check_testbed_version(scene.sim_config, "the pushes")
     tracks = tracks_from_records(records, scene.sim_config)
+    quasi_static = cfg.quasi_static_rule and all(
+        t.push.profile == "constant" and t.push.speed <= QUASI_STATIC_SPEED for t in tracks
+    )
     footprint = scene.footprint
     recorded_noise = scene.sim_config.tactile.force_noise_std
     noise_unknown = cfg.force_noise is None and recorded_noise == 0.0
@@ -397,10 +403,15 @@ def identify(
         z_cf[2:4] = normalise_params(np.array([1.0, 0.5, 0.0, 0.0, 1e-3]))[2:4]
         rng = np.random.default_rng(seed)
         starts = [tmat @ z_cf]
+        # the steady force of a constant push is at most μ·m·g (an off-centre push needs
+        # less), so the draws keep μ·m between the closed form and MU_M_START_SPAN times it
+        s = space_scale()
+        per_log = 1.0 / (s[i_m] + s[i_mu])  # u_0 per unit of log μ·m (`fit_transform`)
+        span = np.log(MU_M_START_SPAN)
         for _ in range(cfg.screen_starts):
             z = rng.multivariate_normal(z_prior, p_z)
             u = tmat @ z
-            u[0] = starts[0][0]
+            u[0] = starts[0][0] + rng.uniform(0.0, span) * per_log
             starts.append(u)
         starts = np.stack(starts)
         res = prob.residuals(starts)
@@ -482,6 +493,12 @@ def identify(
             u, r = trial, rt
             chi2 = float(np.sum(r[:n] ** 2) / max(n - 5, 1))
         h_data = jac.T @ (w[:, None] * jac) * (1.0 / max(1.0, chi2))
+        if quasi_static:
+            # quasi-static pushes reveal neither m at fixed μ·m nor I_z (docs/DESIGN.md §10):
+            # the curvature there comes from contact transients the replay reproduces only to
+            # within the start pose's noise, so it is dropped and those stay at the prior
+            h_data[QUASI_STATIC_BLIND, :] = 0.0
+            h_data[:, QUASI_STATIC_BLIND] = 0.0
         cov_u, lam_d, vecs, flat = laplace_posterior(
             h_data, newton, p_u, cfg.flat_information, cfg.information_scale
         )
@@ -497,6 +514,8 @@ def identify(
         cov_z = 0.5 * (cov_z + cov_z.T)
         com = [PARAM_NAMES.index("com_x"), PARAM_NAMES.index("com_y")]
         cov_z[com, com] += (cfg.com_floor / space_scale()[com]) ** 2
+        i_iz = PARAM_NAMES.index("inertia")
+        cov_z[i_iz, i_iz] += (cfg.inertia_floor / space_scale()[i_iz]) ** 2
         unidentified = tuple(_describe(t_inv @ chol @ vecs[:, j]) for j in np.where(flat)[0])
         spread = None
         if noise_unknown and cfg.between_push_check and len(records) >= 3:
@@ -566,7 +585,14 @@ def identify(
             + ", ".join(f"{n} ×{f:.1f}" for n, f in zip(PARAM_NAMES, widened))
             + ")"
         )
-    if cf["mass"] is None:
+    if quasi_static:
+        notes.append(
+            "quasi-static pushes only (constant, ≤ "
+            f"{QUASI_STATIC_SPEED:g} m/s): m and μ separate only through dynamic content "
+            "(acceleration, free slide) and I_z does not enter, so m at fixed μ·m and I_z keep "
+            "the prior's width; μ·m and the CoM are identified"
+        )
+    elif cf["mass"] is None:
         notes.append(
             "no release push: m and μ separate only through dynamic content (acceleration, "
             "free slide), so constant pushes leave them at the prior except for μ·m"

@@ -1,4 +1,4 @@
-"""Inference on a novel object with a trained model (SPEC §3.7)."""
+"""Inference on a novel object with a trained model (docs/DESIGN.md §9)."""
 
 from pushtoknow.inference.session import (
     POLICIES,

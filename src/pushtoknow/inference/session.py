@@ -1,4 +1,4 @@
-"""Inference on a novel object (SPEC §3.7): K pushes, the parameter posterior carried over.
+"""Inference on a novel object (docs/DESIGN.md §9): K pushes, the parameter posterior carried over.
 
 Per push k:
 1. The executor shows the object at rest: S_0 and the first RGB-D frame.
@@ -355,7 +355,7 @@ class ObjectEstimator:
 
 def active_scorer(policy: Policy, sim_config: SimConfig, horizon_fraction: float = 0.5):
     """The active scorer of `infer_object` for policy "active-kl" or "active-entropy":
-    SPEC §3.5 rollouts of the estimator's filter over the candidates' commanded pad paths
+    docs/DESIGN.md §7 rollouts of the estimator's filter over the candidates' commanded pad paths
     (`testbed.push.pad_positions`), all candidates in one batch."""
     score = {"active-kl": "kl", "active-entropy": "entropy"}[policy]
     push_config = sim_config.push

@@ -7,6 +7,7 @@ configs and loads the weights strictly; any mismatch is a `CheckpointError` nami
 
 from __future__ import annotations
 
+import hashlib
 import io
 import json
 from dataclasses import dataclass, field
@@ -189,6 +190,35 @@ def _camera_dict(camera: CameraModel) -> dict:
     return {k: getattr(camera, k) for k in camera.__dataclass_fields__}
 
 
+def weights_digest(*states: dict) -> str:
+    """SHA-256 over state dicts (names, dtypes, shapes and bytes, in key order): what a
+    checkpoint stores to detect corrupt weights on load."""
+    h = hashlib.sha256()
+    for state in states:
+        for name in sorted(state):
+            t = state[name].detach().cpu().contiguous()
+            h.update(f"{name}|{t.dtype}|{tuple(t.shape)}|".encode())
+            h.update(t.numpy().tobytes())
+    return h.hexdigest()
+
+
+def _check_weights(path: Path, payload: dict) -> None:
+    """Raise CheckpointError when the stored digest does not match the weights (a damaged
+    file) or when a weight is not finite. Checkpoints written before digests were stored get
+    the finiteness check only."""
+    states = (payload["models_state"], payload["visnet_state"])
+    want = payload.get("weights_sha256")
+    if want is not None and weights_digest(*states) != want:
+        raise CheckpointError(
+            f"{path}: the weights do not match their checksum (the file is damaged); "
+            "restore it or retrain"
+        )
+    for state in states:
+        for name, t in state.items():
+            if t.is_floating_point() and not torch.isfinite(t).all():
+                raise CheckpointError(f"{path}: weight {name} holds NaN or infinite values")
+
+
 def save_checkpoint(model: TrainedModel, path: Path) -> Path:
     """Write `model` to path (a directory gets `model.pt`), atomically (temp file + rename)."""
     path = Path(path)
@@ -211,6 +241,7 @@ def save_checkpoint(model: TrainedModel, path: Path) -> Path:
         "models_state": model.models.modules().state_dict(),
         "visnet_state": model.visnet.state_dict(),
     }
+    payload["weights_sha256"] = weights_digest(payload["models_state"], payload["visnet_state"])
     buf = io.BytesIO()
     torch.save(payload, buf)
     tmp = path.with_suffix(path.suffix + ".tmp")
@@ -241,6 +272,7 @@ def load_checkpoint(path: Path) -> TrainedModel:
             "or use the pushtoknow version that wrote it "
             f"({payload.get('pushtoknow_version', 'unknown')})"
         )
+    _check_weights(path, payload)
     try:
         models_config = LearnedModelsConfig.model_validate(payload["models_config"])
         filter_config = FilterConfig.model_validate(payload["filter_config"])

@@ -321,7 +321,7 @@ def sigma_point_features(
 
 
 class LearnedDynamics(DynamicsModel):
-    """(Δψ, Q) = ProcessNet(features(χ), enc(χ)) per sigma point (SPEC §3.4 step 2)."""
+    """(Δψ, Q) = ProcessNet(features(χ), enc(χ)) per sigma point (docs/DESIGN.md §6 step 2)."""
 
     def __init__(self, encoding: ShapeActionEncoding, process_net: ProcessNet):
         super().__init__()
@@ -339,7 +339,7 @@ class LearnedDynamics(DynamicsModel):
 
 
 class LearnedObservation(ObservationModel):
-    """h(s) = (x, y, θ, F_x, F_y[, p_contact]) with forces from TacNet (SPEC §3.4 step 3).
+    """h(s) = (x, y, θ, F_x, F_y[, p_contact]) with forces from TacNet (docs/DESIGN.md §6 step 3).
 
     include_contact appends sigmoid(contact logit) as an observation of contact ∈ {0, 1}
     (treated as Gaussian by the filter; off by default, the logit is then a training target).

@@ -1,4 +1,4 @@
-"""The five networks of SPEC §3.3 (paper §III-C/D), sizes configurable.
+"""The five networks of docs/DESIGN.md §5 (paper §III-C/D), sizes configurable.
 
 All take and return float tensors on the device/dtype of their weights; N is any batch size
 (for the filter's models N = B · C, objects times sigma points). Units are SI; outputs that

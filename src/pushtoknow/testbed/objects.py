@@ -254,7 +254,8 @@ def catalogue_object(idx: int) -> ObjectSpec:
     return cat.objects[idx]
 
 
-# Shapes no training object has (the "novel shapes" of SPEC §3.7), sizes like the catalogue's.
+# Shapes no training object has (the "novel shapes" of docs/DESIGN.md §9), sizes like the
+# catalogue's.
 NOVEL_SHAPES: dict[str, dict] = {
     "pentagon": {
         "type": "polygon",
@@ -309,8 +310,8 @@ def sample_continuous_object(
 
 
 def novel_objects(n: int, seed: int = 0) -> list[ObjectSpec]:
-    """n novel objects (SPEC §3.7): alternately an unseen shape (`NOVEL_SHAPES`) and a catalogue
-    shape, both with continuous parameters within the catalogue ranges; seeded."""
+    """n novel objects (docs/DESIGN.md §9): alternately an unseen shape (`NOVEL_SHAPES`) and a
+    catalogue shape, both with continuous parameters within the catalogue ranges; seeded."""
     rng = np.random.default_rng(seed)
     out = []
     for i in range(n):

@@ -50,7 +50,8 @@ def constant_profile(speed: float, horizon: float) -> SpeedProfile:
 
 def release_profile(peak: float, accel: float, decel: float, horizon: float) -> SpeedProfile:
     """Accelerate from rest to `peak`, then stop the pad at `decel` (> μ·g) so the object
-    leaves the pad and slides freely: its deceleration μ·g separates μ from m (SPEC §3.8)."""
+    leaves the pad and slides freely: its deceleration μ·g separates μ from m (docs/DESIGN.md
+    §10)."""
     t1 = peak / accel
     t2 = t1 + peak / decel
     if t2 >= horizon:

@@ -18,7 +18,8 @@ from pushtoknow.common.errors import ObjectSpecError
 
 ELLIPSE_VERTICES = 48  # polygonal approximation of ellipse footprints (max radial error 0.2%)
 
-# SPEC §3.1 catalogue shapes (metres). butter: approximated as a rounded rectangle (see below).
+# docs/DESIGN.md §3 catalogue shapes (metres). butter: approximated as a rounded rectangle (see
+# below).
 CATALOGUE_SHAPES: dict[str, dict] = {
     "rect1": {"type": "rectangle", "width": 0.090, "height": 0.090},
     "rect2": {"type": "rectangle", "width": 0.0899, "height": 0.1126},

@@ -1,4 +1,5 @@
-"""End-to-end training of the filter's networks through the filter (SPEC §3.6, second stage).
+"""End-to-end training of the filter's networks through the filter (docs/DESIGN.md §8, second
+stage).
 
 Truncated windows: each training example is a window of `window` consecutive steps of one push.
 The belief at the window's start is either the *prior* (parameters from the training

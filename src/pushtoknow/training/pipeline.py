@@ -1,6 +1,6 @@
 """`pushtoknow train`: the whole training of one variant, from a dataset to a checkpoint.
 
-Stages (SPEC §3.6), each logged to a CSV file in the run directory:
+Stages (docs/DESIGN.md §8), each logged to a CSV file in the run directory:
 1. VisNet, supervised (`visnet.csv`), or reused from another run (`visnet_from`);
 2. VisNet poses of every frame (reference = truth perturbed as in VisNet's training);
 3. supervised warm-up of the filter's networks on ground-truth transitions (`supervised.csv`);

@@ -1,4 +1,4 @@
-"""Supervised warm-up of the filter's networks on ground-truth transitions (SPEC §3.6).
+"""Supervised warm-up of the filter's networks on ground-truth transitions (docs/DESIGN.md §8).
 
 Before training end to end through the filter, each learned model is fitted where its target is
 known exactly from simulation, which is far cheaper than back-propagating through the filter:

@@ -1,4 +1,4 @@
-"""VisNet as a render-and-compare pose sensor, trained supervised (SPEC §3.6, first stage).
+"""VisNet as a render-and-compare pose sensor, trained supervised (docs/DESIGN.md §8, first stage).
 
 VisNet sees the current RGB-D image and S_0 warped to a *reference pose* (at inference the
 filter's predicted mean; in training the true pose perturbed by noise) and outputs the pose of

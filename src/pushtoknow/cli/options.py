@@ -1,0 +1,18 @@
+"""Options shared by the commands: one definition each."""
+
+from __future__ import annotations
+
+import typer
+
+SEED_HELP = "random seed (≥ 0): same seed, same result on the CPU"
+MIN_SIGMA_POINTS = 10
+
+
+def seed_option(default: int | None = 0, help: str = SEED_HELP):
+    """The `--seed` option of every command (numpy seeds are non-negative)."""
+    return typer.Option(default, "--seed", min=0, help=help)
+
+
+def sigma_points_option(default: int | None = None, help: str = "default: the model's"):
+    """The `--sigma-points` option of every command that runs the filter."""
+    return typer.Option(default, "--sigma-points", min=MIN_SIGMA_POINTS, help=help)
