@@ -16,6 +16,16 @@ CASES = [
     (["infer", "--object", "catalogue:3", "--seed", "-1"], "--seed"),
     (["push", "--profile", "fast"], "--profile"),
     (["evaluate-heldout", "--objects", "0"], "--objects"),
+    (
+        [
+            "push",
+            "--object",
+            '{"shape": "rect1", "mass": 1e6, "friction": 0.5, "com": [0, 0], "inertia": 1.0}',
+            "--out",
+            "{tmp}/p.png",
+        ],
+        "mass=1000000.0",
+    ),
     (["identify", "--pushes", "{tmp}/nowhere"], "no such dataset directory"),
     (["identify", "--pushes", "{tmp}", "--config", "{tmp}/missing.yaml"], "missing.yaml"),
     (["identify", "--pushes", "{tmp}", "--config", "{tmp}/broken.yaml"], "not valid YAML"),
@@ -41,7 +51,7 @@ def test_bad_input_exits_2_with_a_message_not_a_traceback(
     (tmp_path / "unknown.yaml").write_text("huber_k: 3\n")
     taken = tmp_path / "taken"
     taken.write_text("keep me")
-    code, text = _run(monkeypatch, capsys, [a.format(tmp=tmp_path) for a in args])
+    code, text = _run(monkeypatch, capsys, [a.replace("{tmp}", str(tmp_path)) for a in args])
     assert code == 2, text
     assert needle in text and "Traceback" not in text
     assert taken.read_text() == "keep me"

@@ -33,6 +33,16 @@ def test_env_step_is_one_push():
     env.close()
 
 
+def test_env_refuses_a_nan_or_misshapen_action_without_pushing():
+    env = PushEnv("catalogue:7", FAST, max_pushes=2)
+    env.reset(seed=3)
+    for bad in ([np.nan, 0.5, 0.5, 0.0], [0.2, 0.5, 0.5], [0.2, np.inf, 0.5, 1.0]):
+        with pytest.raises(ValueError, match="action must be 4 finite numbers"):
+            env.step(np.array(bad))
+    assert env._n == 0  # nothing was executed
+    env.close()
+
+
 def test_env_is_seeded():
     def roll(seed):
         env = PushEnv(None, FAST)

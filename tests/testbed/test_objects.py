@@ -28,6 +28,7 @@ def spec(**kw):
     [
         ({"mass": -0.1}, "mass", -0.1),
         ({"mass": 0}, "mass", 0),
+        ({"mass": 1e6, "inertia": 1.0}, "mass", 1e6),  # the pad would pass through it
         ({"friction": 0.0}, "friction", 0.0),
         ({"inertia": -1e-3}, "inertia", -1e-3),
         ({"com": [0.2, 0.0]}, "com", [0.2, 0.0]),

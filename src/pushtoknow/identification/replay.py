@@ -28,7 +28,7 @@ from shapely.ops import nearest_points
 from pushtoknow.common.errors import IdentificationError, PushToKnowError
 from pushtoknow.common.params import ObjectParams
 from pushtoknow.testbed.config import SimConfig
-from pushtoknow.testbed.objects import COM_MARGIN, ObjectSpec
+from pushtoknow.testbed.objects import COM_MARGIN, MAX_MASS, ObjectSpec
 from pushtoknow.testbed.push import Push
 from pushtoknow.testbed.shapes import Footprint, footprint_from_shape
 
@@ -91,6 +91,9 @@ def feasible(phi: np.ndarray, footprint: Footprint) -> tuple[np.ndarray, float, 
     excess = max(0.0, float(phi[4] / bound - 1.0)) + max(0.0, float(phi[1] / MAX_FRICTION - 1.0))
     phi[4] = min(phi[4], bound)
     phi[1] = min(phi[1], MAX_FRICTION)
+    if phi[0] > MAX_MASS:  # the replay's limit; I_z keeps its share of the bound
+        phi[4] *= MAX_MASS / phi[0]
+        phi[0] = MAX_MASS
     return phi, moved, excess
 
 

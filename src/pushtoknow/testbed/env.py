@@ -79,7 +79,16 @@ class PushEnv(gym.Env):
         return self._obs(), {"object": spec.to_dict()}
 
     def action_to_push(self, action) -> Push:
-        a = np.clip(np.asarray(action, np.float64), 0.0, 1.0)
+        """The push of an action (4,) in [0, 1] (values outside are clipped). Raises ValueError
+        for an action of another shape or with a non-finite entry (which would otherwise pick
+        contour point 0 without a word)."""
+        a = np.asarray(action, np.float64)
+        if a.shape != self.action_space.shape or not np.isfinite(a).all():
+            raise ValueError(
+                f"action must be {self.action_space.shape[0]} finite numbers in [0, 1], got "
+                f"{np.asarray(action).tolist()}"
+            )
+        a = np.clip(a, 0.0, 1.0)
         c = mask_contour(self._view.s0, self._exec.camera)
         cum = np.cumsum(c.lengths)
         i = int(np.searchsorted(cum, a[0] * cum[-1]) % len(cum))
