@@ -47,7 +47,7 @@ def estimate_real(
         True,
         "--identify/--no-identify",
         help="also identify the parameters by replaying the recorded pusher tracks in MuJoCo "
-        "(after 1…K pushes; ~10 s per fit of 3 short pushes on 2 cores)",
+        "(after 1…K pushes; ~100 s for the 3 MIT sample pushes on 2 cores)",
     ),
     out: Path | None = typer.Option(None, "--out", help="write the report JSON here"),
     markdown: Path | None = typer.Option(None, "--markdown", help="write the tables here (.md)"),

@@ -577,7 +577,7 @@ def identify_real(data_dir: Path, real: dict, seed: int, config=None) -> dict:
     from pushtoknow.identification.config import IdentifyConfig
     from pushtoknow.identification.fit import identify
     from pushtoknow.identification.recordings import recorded_clock
-    from pushtoknow.identification.replay import ReplayScene
+    from pushtoknow.identification.replay import ReplayScene, RolloutPool
 
     records, attrs = real["records"], real["attrs"]
     try:
@@ -591,30 +591,30 @@ def identify_real(data_dir: Path, real: dict, seed: int, config=None) -> dict:
     spec = real["spec"]
     cfg = config or IdentifyConfig()
     scene = ReplayScene(spec.shape, spec.height, sim, stop_at_rest=cfg.stop_at_rest)
-    per_push, last = [], None
-    for k in range(1, len(records) + 1):
-        last = identify(records[:k], scene, cfg, seed)
-        d = last.as_dict()
-        per_push.append(
-            {
-                **d["parameters"],
-                "mu_m": d["mu_m"],
-                "unidentified": d["unidentified"],
-                "reduced_chi2": d["reduced_chi2"],
-                "seconds": d["seconds"],
-                "rollouts": d["rollouts"],
-            }
-        )
+    per_push, d = [], {}
+    with RolloutPool(cfg.workers) as pool:  # one process pool for every fit
+        for k in range(1, len(records) + 1):
+            d = identify(records[:k], scene, cfg, seed, pool=pool).as_dict()
+            per_push.append(
+                {
+                    **d["parameters"],
+                    "mu_m": d["mu_m"],
+                    "unidentified": d["unidentified"],
+                    "reduced_chi2": d["reduced_chi2"],
+                    "seconds": d["seconds"],
+                    "rollouts": d["rollouts"],
+                }
+            )
     return {
         "per_push": per_push,
         "rate_hz": rate,
-        "noise_std": last.as_dict()["noise_std"],
+        "noise_std": d["noise_std"],
         "model": (
             f"MuJoCo replay of the recorded pusher tracks: probe radius "
             f"{sim.pad.radius * 1e3:.2f} mm, pad friction {sim.pad.friction:g}, table friction "
             "Coulomb at the testbed's support grid (uniform pressure), footprint as imported"
         ),
-        "notes": list(last.notes),
+        "notes": d["notes"],
     }
 
 

@@ -420,14 +420,15 @@ def identify(
 
         n = prob.n_data
         fd = np.asarray(cfg.fd_steps, dtype=np.float64)
-        counts = {"iterations": 0}
+        iterations = 0
 
         def refine(u: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, float]:
             """Levenberg–Marquardt from u (residuals r) → (u, r, cost, reduced χ²)."""
+            nonlocal iterations
             cost = costs(r[None], u[None])[0]
             lam = 1e-2
             for _ in range(cfg.max_iterations):
-                counts["iterations"] += 1
+                iterations += 1
                 probe = u[None] + np.diag(fd)
                 rj = prob.residuals(probe)
                 report(5)
@@ -473,7 +474,6 @@ def identify(
             # the optimum (force, position, angle), and the fit is refined once under it
             prob.sigmas *= misfit_noise_scale(r[:n].reshape(-1, 5), prob.push_lengths)
             u, r, cost, chi2 = refine(u, prob.residuals(u[None])[0])
-        iterations = counts["iterations"]
 
         # ---- Laplace at the optimum, combined with the prior
         probe = np.concatenate([u[None] + np.diag(fd), u[None] - np.diag(fd)])
@@ -521,8 +521,6 @@ def identify(
         if noise_unknown and cfg.between_push_check and len(records) >= 3:
             # the pushes' disagreement is model error the misfit's noise level cannot show:
             # the jackknife covariance of leave-one-push-out fits joins the posterior's
-            offset = np.zeros(5)
-            offset[2:4] = np.array(scene.frame_offset) / space_scale()[2:4]
             quiet = cfg.model_copy(update={"between_push_check": False})
             loo = np.stack(
                 [
@@ -534,7 +532,6 @@ def identify(
                         progress,
                         pool,
                     ).mean_norm
-                    - offset
                     for i in range(len(records))
                 ]
             )

@@ -282,8 +282,7 @@ class PushSimulator:
         if pad_track is not None:
             pad_pos = np.column_stack([np.interp(t_steps, time, pad_track[:, i]) for i in (0, 1)])
             seg_vel = np.diff(pad_track, axis=0) * rate  # (T - 1, 2)
-            seg = np.minimum(np.searchsorted(time, t_steps, side="right") - 1, T - 2)
-            pad_vel = seg_vel[seg]
+            pad_vel = np.repeat(seg_vel, steps_per_sample * substeps[1:], axis=0)
             moving_seg = np.flatnonzero(np.any(seg_vel != 0.0, axis=1))
             last = moving_seg[-1] if len(moving_seg) else None
             pad_stops = np.inf if last is None or last == T - 2 else time[last + 1]
