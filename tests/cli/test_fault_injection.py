@@ -26,6 +26,25 @@ CASES = [
         ],
         "mass=1000000.0",
     ),
+    (
+        [
+            "push",
+            "--object",
+            '{"shape": {"type": "rectangle", "width": 4, "height": 4}, "mass": 0.5, '
+            '"friction": 0.5, "com": [0, 0], "inertia": 1.0}',
+        ],
+        "radius 2.828 m",
+    ),
+    (
+        [
+            "push",
+            "--object",
+            '{"shape": {"type": "polygon", "vertices": [[0, 0], [0.1, 0], [0, 0.1]]}, '
+            '"mass": 0.5, "friction": 0.5, "com": [0.03, 0.03], "inertia": 1e-4}',
+        ],
+        "centroid at (33.333, 33.333) mm",
+    ),
+    (["dataset", "info", "{tmp}/garbage", "--verify"], "shard-00000.h5"),
     (["identify", "--pushes", "{tmp}/nowhere"], "no such dataset directory"),
     (["identify", "--pushes", "{tmp}", "--config", "{tmp}/missing.yaml"], "missing.yaml"),
     (["identify", "--pushes", "{tmp}", "--config", "{tmp}/broken.yaml"], "not valid YAML"),
@@ -48,6 +67,8 @@ def test_bad_input_exits_2_with_a_message_not_a_traceback(
     args, needle, tmp_path, monkeypatch, capsys
 ):
     (tmp_path / "broken.yaml").write_text("a: [\n")
+    (tmp_path / "garbage").mkdir()
+    (tmp_path / "garbage" / "shard-00000.h5").write_bytes(b"\x89HDF garbage" * 10)
     (tmp_path / "unknown.yaml").write_text("huber_k: 3\n")
     taken = tmp_path / "taken"
     taken.write_text("keep me")
@@ -70,3 +91,29 @@ def test_only_user_errors_become_messages():
     assert error_message(FileExistsError(17, "File exists", "out")) == "out: file exists"
     assert error_message(KeyError("x")) is None
     assert error_message(ZeroDivisionError()) is None
+
+
+def test_a_full_disk_ends_in_a_message_and_loses_nothing(tmp_path, monkeypatch, capsys):
+    """`simulate` on a full disk: one line naming the file and the reason, exit 2; the shard
+    being written is left as a *.tmp that the next run discards, no finished file is touched."""
+    import errno
+
+    import h5py
+
+    real_file = h5py.File
+
+    def full(name, mode="r", *a, **kw):
+        if mode == "w":
+            raise OSError(errno.ENOSPC, "No space left on device", str(name))
+        return real_file(name, mode, *a, **kw)
+
+    out = tmp_path / "ds"
+    out.mkdir()
+    keep = out / "notes.txt"
+    keep.write_text("mine")
+    monkeypatch.setattr(h5py, "File", full)
+    args = ["simulate", "--objects", "1", "--pushes", "1", "--out", str(out), "--workers", "1"]
+    code, text = _run(monkeypatch, capsys, args)
+    assert code == 2 and "no space left on device" in text and "Traceback" not in text
+    assert "shard-00000.h5" in text
+    assert keep.read_text() == "mine" and not list(out.glob("shard-*.h5"))

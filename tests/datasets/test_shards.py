@@ -147,3 +147,42 @@ def test_objects_from_file(tmp_path):
     assert specs[1].shape == "hex"
     with pytest.raises(ValueError, match="exceeds"):
         select_objects(str(f), 3, 0)
+
+
+def test_verify_counts_intact_shards(dataset):
+    info = dataset_info(dataset, verify=True)
+    assert info["verified_shards"] == info["shards"] == 2
+    assert "verified_shards" not in dataset_info(dataset)
+
+
+def _flip_byte_in(path, dataset_name: str) -> None:
+    """Corrupt one byte inside a dataset's stored (checksummed) chunk."""
+    with h5py.File(path, "r") as f:
+        offset = f[dataset_name].id.get_chunk_info(0).byte_offset
+    with open(path, "r+b") as fh:
+        fh.seek(offset + 3)
+        b = fh.read(1)
+        fh.seek(offset + 3)
+        fh.write(bytes([b[0] ^ 0xFF]))
+
+
+@pytest.mark.parametrize("where", ["bytes", "attribute"])
+def test_corruption_inside_a_shard_is_found_by_verify_and_resume(tmp_path, dataset, where):
+    import shutil
+
+    copy = tmp_path / "ds"
+    shutil.copytree(dataset, copy)
+    bad = shard_path(copy, 1)
+    if where == "bytes":
+        _flip_byte_in(bad, "objects/2/pushes/1/pose")
+    else:
+        with h5py.File(bad, "a") as f:
+            f["objects/2"].attrs["params"] = f["objects/2"].attrs["params"] * 1.01
+    dataset_info(copy)  # a summary does not read the arrays
+    with pytest.raises(DatasetError, match="shard-00001.h5") as e:
+        dataset_info(copy, verify=True)
+    assert ("digest" in str(e.value)) or ("pose" in str(e.value))
+    before = bad.read_bytes()
+    with pytest.raises(DatasetError, match="shard-00001.h5"):
+        generate_dataset(copy, cfg(), progress=False)  # resume refuses to build on it
+    assert bad.read_bytes() == before  # and leaves it as it was

@@ -10,6 +10,7 @@ from pushtoknow.evaluation.metrics import (
     nrmse,
     product_nrmse,
 )
+from pushtoknow.testbed.objects import NOVEL_SHAPES
 from pushtoknow.testbed.shapes import CATALOGUE_SHAPES, footprint_from_shape
 
 
@@ -58,6 +59,13 @@ def test_impossible_estimates_are_counted():
     ]
     mean = np.array([[good, *bad], [good] * 6])
     assert impossible_estimates(mean, [fp, fp]) == len(bad)
+
+
+def test_a_com_in_a_notch_is_possible_beyond_the_hull_is_not():
+    fp = footprint_from_shape(NOVEL_SHAPES["l_shape"])  # its notch is around (+2, +2) cm
+    notch, beyond = [0.5, 0.5, 0.02, 0.02, 1e-3], [0.5, 0.5, 0.05, 0.05, 1e-3]
+    assert not fp.contains(notch[2:4])
+    assert impossible_estimates(np.array([[notch, beyond]]), [fp]) == 1
 
 
 def test_product_nrmse_zero_when_product_right():

@@ -14,7 +14,7 @@ from pushtoknow.identification.prior import fit_transform, prior_moments
 from pushtoknow.identification.replay import ReplayScene, feasible
 from pushtoknow.identification.synthetic import simulate_pushes
 from pushtoknow.testbed.config import SimConfig
-from pushtoknow.testbed.objects import ObjectSpec, resolve_shape
+from pushtoknow.testbed.objects import COM_MARGIN, ObjectSpec, resolve_shape
 
 SHORT = SimConfig(render=False).model_copy(
     update={"push": SimConfig().push.model_copy(update={"horizon": 3.0})}
@@ -49,7 +49,7 @@ def test_feasible_keeps_the_com_inside_and_the_inertia_possible():
     spec = ObjectSpec("rect1", ObjectParams(0.5, 0.5, 0.0, 0.0, 1e-3))
     phi, moved, excess = feasible(np.array([0.5, 3.0, 0.2, 0.0, 1.0]), spec.footprint)
     assert moved > 0.1 and excess > 0
-    assert spec.footprint.contains(phi[2:4], margin=0.005)
+    assert spec.footprint.contains(phi[2:4], margin=COM_MARGIN)
     assert phi[1] < 2.0 and phi[4] <= 0.5 * spec.footprint.max_radius_from(phi[2:4]) ** 2
 
 

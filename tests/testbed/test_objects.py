@@ -12,9 +12,10 @@ from pushtoknow.testbed.objects import (
     build_catalogue,
     inertia_upper_bound,
     load_object_spec,
+    novel_objects,
     sample_continuous_object,
 )
-from pushtoknow.testbed.shapes import CATALOGUE_SHAPES, footprint_from_shape
+from pushtoknow.testbed.shapes import CATALOGUE_SHAPES, about_centroid, footprint_from_shape
 
 GOOD = {"shape": "rect1", "mass": 0.5, "friction": 0.5, "com": [0.0, 0.01], "inertia": 0.5e-3}
 
@@ -68,11 +69,11 @@ def test_missing_and_unknown_fields():
         ObjectSpec.from_dict({**GOOD, "colour": "red"})
 
 
+L_CORNER = [[0, 0], [0.1, 0], [0.1, 0.05], [0.05, 0.05], [0.05, 0.1], [0, 0.1]]
+
+
 def test_non_convex_polygon_is_decomposed_into_convex_pieces():
-    L = {
-        "type": "polygon",
-        "vertices": [[0, 0], [0.1, 0], [0.1, 0.05], [0.05, 0.05], [0.05, 0.1], [0, 0.1]],
-    }
+    L = {"type": "polygon", "vertices": about_centroid(L_CORNER)}
     s = spec(shape=L, com=[0.0, 0.0], inertia=0.3e-3)
     pieces = s.footprint.convex_pieces()
     assert len(pieces) > 1
@@ -107,6 +108,71 @@ def test_catalogue_is_825_valid_seeded_objects():
             assert any(np.isclose(v, g) for g in CATALOGUE_GRID[k])
     again = build_catalogue.__wrapped__()
     assert [o.params for o in again.objects] == [o.params for o in cat.objects]
+
+
+def test_catalogue_and_novel_objects_are_pinned():
+    """The catalogue and the novel objects are the ones every model was trained and evaluated
+    on: a change of the validity rules must not change them."""
+    import hashlib
+
+    def digest(objects):
+        a = np.array([o.params.as_array() for o in objects])
+        return hashlib.sha256(a.tobytes()).hexdigest()[:16]
+
+    cat = build_catalogue()
+    assert (digest(cat.objects), cat.rejected) == ("29adb4a96efc611b", 30)
+    assert digest(novel_objects(40, 0)) == "1b9cbcbb9939dd95"
+
+
+def test_off_centroid_polygon_is_refused_with_its_offset():
+    with pytest.raises(ObjectSpecError, match=r"centroid at \(33\.333, 33\.333\) mm") as e:
+        spec(shape={"type": "polygon", "vertices": [[0, 0], [0.1, 0], [0, 0.1]]}, com=[0, 0])
+    assert e.value.field == "shape.vertices"
+    centred = about_centroid([[0, 0], [0.1, 0], [0, 0.1]])
+    assert spec(shape={"type": "polygon", "vertices": centred}, com=[0, 0], inertia=1e-4)
+
+
+def test_stored_legacy_polygon_keeps_its_centroid_frame_com():
+    """Datasets written before the frame rule kept off-centroid vertices with the CoM already
+    in the centroid frame: read back, the footprint is centred and the CoM is unchanged."""
+    d = {**GOOD, "shape": {"type": "polygon", "vertices": L_CORNER}, "com": [0.004, -0.003]}
+    d["inertia"] = 0.3e-3
+    s = ObjectSpec.from_dict(d, stored=True)
+    assert (s.params.com_x, s.params.com_y) == (0.004, -0.003)
+    c = s.footprint.polygon.centroid
+    assert abs(c.x) < 1e-12 and abs(c.y) < 1e-12
+    with pytest.raises(ObjectSpecError, match="centroid at"):
+        ObjectSpec.from_dict(d)
+
+
+def test_com_rule_follows_physics_for_non_convex_footprints():
+    """Any mass distribution over a footprint has its CoM in the footprint's convex hull: an
+    L's notch is allowed (mass in both arms), a point beyond the hull is not, and the CoM may
+    come closer to an edge than the catalogue's 5 mm."""
+    from shapely.geometry import Polygon
+
+    L = {"type": "polygon", "vertices": about_centroid(L_CORNER)}
+    c = Polygon(L_CORNER).centroid
+    notch = [0.065 - c.x, 0.065 - c.y]  # in the notch, 14 mm inside the hull's diagonal
+    s = spec(shape=L, com=notch, inertia=0.3e-3)
+    assert not s.footprint.contains(notch)
+    with pytest.raises(ObjectSpecError, match="convex hull") as e:
+        spec(shape=L, com=[0.09 - c.x, 0.09 - c.y], inertia=0.3e-3)
+    assert e.value.field == "com"
+    assert spec(com=[0.0415, 0.0])  # 3.5 mm from rect1's edge
+
+
+@pytest.mark.parametrize(
+    ("override", "needle"),
+    [
+        ({"shape": {"type": "rectangle", "width": 4.0, "height": 4.0}}, "radius 2.828 m"),
+        ({"shape": {"type": "rectangle", "width": 0.02, "height": 0.09}}, "width 0.0200 m"),
+        ({"height": 0.005}, "height=0.005"),
+    ],
+)
+def test_objects_the_testbed_cannot_simulate_are_refused(override, needle):
+    with pytest.raises(ObjectSpecError, match=needle.replace(".", r"\.")):
+        spec(**{**override, "com": [0.0, 0.0], "inertia": 1e-4})
 
 
 def test_catalogue_rejections_are_physical():

@@ -5,6 +5,7 @@ import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
+from pushtoknow.testbed.objects import COM_MARGIN, NOVEL_SHAPES
 from pushtoknow.testbed.scene import support_loads, support_points
 from pushtoknow.testbed.shapes import CATALOGUE_SHAPES, footprint_from_shape
 
@@ -31,16 +32,22 @@ def test_centred_com_gives_the_centroid_of_the_points():
     np.testing.assert_allclose(w, 1.0 / len(pts), atol=1e-9)  # uniform pressure
 
 
-@settings(max_examples=60, deadline=None)
+SHAPES = {**CATALOGUE_SHAPES, **NOVEL_SHAPES}
+
+
+@settings(max_examples=120, deadline=None)
 @given(
-    shape=st.sampled_from(sorted(CATALOGUE_SHAPES)),
+    shape=st.sampled_from(sorted(SHAPES)),
     u=st.floats(0.0, 1.0),
     v=st.floats(0.0, 1.0),
 )
 @example(shape="rect3", u=0.0002, v=0.001953125)  # a corner CoM needed a stiffer balance
+@example(shape="l_shape", u=0.99, v=0.99)  # in the notch, near the hull's diagonal
 def test_loads_are_nonnegative_sum_to_one_and_balance_at_the_com(shape, u, v):
-    fp = footprint_from_shape(CATALOGUE_SHAPES[shape])
-    poly = fp.polygon.buffer(-0.005)  # the objects' CoM rule: 5 mm inside the footprint
+    """Every CoM the object rule allows (the convex hull less COM_MARGIN, a non-convex
+    footprint's notch included) is carried by the supports with non-negative loads."""
+    fp = footprint_from_shape(SHAPES[shape])
+    poly = fp.com_region(COM_MARGIN)
     minx, miny, maxx, maxy = poly.bounds
     com = np.array([minx + u * (maxx - minx), miny + v * (maxy - miny)])
     from shapely.geometry import Point

@@ -68,6 +68,29 @@ def _save_and_print_json(data: dict, out: Path | None, as_json: bool) -> bool:
     return as_json
 
 
+def _flatten(data: dict, prefix: str = "") -> list[tuple[str, str]]:
+    rows = []
+    for k, v in data.items():
+        if isinstance(v, dict):
+            rows += _flatten(v, f"{prefix}{k}.")
+        else:
+            rows.append((f"{prefix}{k}", f"{v:.4g}" if isinstance(v, float) else str(v)))
+    return rows
+
+
+def _print_result(data: dict, as_json: bool, title: str) -> None:
+    """A command's result on stdout: JSON with --json, else a table of its (flattened) fields."""
+    if as_json:
+        print(json.dumps(data))
+        return
+    t = Table(title=title)
+    t.add_column("field")
+    t.add_column("value", justify="right")
+    for k, v in _flatten(data):
+        t.add_row(k, v)
+    console.print(t)
+
+
 def _profiles(text: str) -> tuple[str, ...]:
     """'constant,release' → ("constant", "release"), each checked."""
     names = tuple(p.strip() for p in text.split(",") if p.strip())
@@ -128,12 +151,18 @@ def simulate(
 
 
 @dataset_app.command("info")
-def dataset_info_cmd(root: Path, as_json: bool = typer.Option(False, "--json")):
+def dataset_info_cmd(
+    root: Path,
+    as_json: bool = typer.Option(False, "--json"),
+    verify: bool = typer.Option(
+        False, "--verify", help="read every shard and check its checksums and content digest"
+    ),
+):
     """Summarise a dataset directory."""
     from pushtoknow.datasets.shards import dataset_info
 
     try:
-        info = dataset_info(root)
+        info = dataset_info(root, verify=verify)
     except PushToKnowError as e:
         _fail(e)
     if info["complete"] is False:
@@ -153,12 +182,16 @@ def dataset_info_cmd(root: Path, as_json: bool = typer.Option(False, "--json")):
 
 
 @bench_app.command("sim")
-def bench_sim(as_json: bool = typer.Option(False, "--json"), pushes: int = 6, seed: int = 0):
+def bench_sim(
+    as_json: bool = typer.Option(False, "--json"),
+    pushes: int = typer.Option(6, "--pushes", min=1),
+    seed: int = seed_option(),
+):
     """Simulator real-time factor (64×64 RGB-D + tactile at 10 Hz, one process)."""
     from pushtoknow.bench.sim import run_sim_bench
 
     res = run_sim_bench(pushes=pushes, seed=seed)
-    print(json.dumps(res, indent=None if as_json else 1))
+    _print_result(res, as_json, "simulator speed")
 
 
 @bench_app.command("physics")
@@ -172,7 +205,7 @@ def bench_physics(
     before: Path | None = typer.Option(
         None, "--before", help="JSON report of an earlier testbed version, shown beside"
     ),
-    seed: int = 0,
+    seed: int = seed_option(),
 ):
     """Physics fidelity of the testbed: chaos, quasi-static pushing, Coulomb release, what
     the 10 Hz record reveals, simulation speed (docs/PHYSICS.md)."""
@@ -197,19 +230,19 @@ def bench_physics(
 
 
 @bench_app.command("filter")
-def bench_filter(as_json: bool = typer.Option(False, "--json"), seed: int = 0):
+def bench_filter(as_json: bool = typer.Option(False, "--json"), seed: int = seed_option()):
     """Filter step latency (C = 100) and batched throughput (32 objects)."""
     from pushtoknow.bench.filter import run_filter_bench
 
     res = run_filter_bench(seed=seed)
-    print(json.dumps(res, indent=None if as_json else 1))
+    _print_result(res, as_json, "filter latency and throughput")
 
 
 @bench_app.command("active")
 def bench_active(
     as_json: bool = typer.Option(False, "--json"),
-    seed: int = 0,
-    candidates: int = typer.Option(16, "--candidates"),
+    seed: int = seed_option(),
+    candidates: int = typer.Option(16, "--candidates", min=1),
     sigma_points: int = sigma_points_option(100, "sigma points (≥ 10)"),
 ):
     """One active push decision: M candidates, N = 50% of the horizon, C sigma points; prints
@@ -217,7 +250,7 @@ def bench_active(
     from pushtoknow.bench.active import run_active_bench
 
     res = run_active_bench(seed=seed, num_candidates=candidates, num_sigma_points=sigma_points)
-    print(json.dumps(res, indent=None if as_json else 1))
+    _print_result(res, as_json, "active push decision")
 
 
 @app.command("evaluate-heldout")
@@ -448,6 +481,7 @@ def import_mit(
     as_speed: float | None = typer.Option(
         None, "--as-speed", help="mm/s: time-rescale each push to this speed (quasi-static)"
     ),
+    as_json: bool = typer.Option(False, "--json"),
 ):
     """Convert MIT Push recordings into the project's dataset format (synthetic RGB-D)."""
     from pushtoknow.datasets.mit_import import import_mit_dataset
@@ -465,7 +499,7 @@ def import_mit(
         )
     except PushToKnowError as e:
         _fail(e)
-    console.print(json.dumps(res))
+    _print_result(res, as_json, f"imported into {out}")
 
 
 @app.command("push")

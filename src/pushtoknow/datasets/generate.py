@@ -170,6 +170,7 @@ def write_pending_shards(
     ]
     skipped = len(plan) - len(todo)
 
+    from rich.console import Console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
 
     with Progress(
@@ -178,6 +179,7 @@ def write_pending_shards(
         MofNCompleteColumn(),
         TimeRemainingColumn(),
         disable=not progress,
+        console=Console(stderr=True),  # progress on stderr, results on stdout
     ) as bar:
         task = bar.add_task(
             f"{description} ({skipped} shards already done)", total=sum(len(t[2]) for t in todo)

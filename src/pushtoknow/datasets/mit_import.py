@@ -69,7 +69,6 @@ import math
 import os
 from pathlib import Path
 
-import h5py
 import numpy as np
 
 from pushtoknow.common.errors import DatasetError
@@ -393,30 +392,21 @@ def _write_shard_with_attrs(
     shard_index: int,
     sim_config_json: str,
 ) -> None:
-    """`write_shard` to ``<path>.part``, add the MIT attributes, fsync, rename to `path`."""
-    part = path.with_name(path.name + _PART_SUFFIX)
+    """`write_shard` (atomic) with the MIT provenance attributes."""
     write_shard(
-        part,
+        path,
         episodes,
         fingerprint=fingerprint,
         shard_index=shard_index,
         sim_config_json=sim_config_json,
+        attrs={
+            "source": SOURCE_TAG,
+            "shift_convention": SHIFT_CONVENTION,
+            "tactile_convention": TACTILE_CONVENTION,
+        },
+        object_attrs=object_attrs,
+        push_attrs=push_attrs,
     )
-    with h5py.File(part, "r+") as f:
-        f.attrs.update(
-            source=SOURCE_TAG,
-            shift_convention=SHIFT_CONVENTION,
-            tactile_convention=TACTILE_CONVENTION,
-        )
-        for ep, oa, pas in zip(episodes, object_attrs, push_attrs):
-            g = f["objects"][str(ep.object_index)]
-            g.attrs.update(oa)
-            for k, pa in enumerate(pas):
-                g["pushes"][str(k)].attrs.update(pa)
-        f.flush()
-    with open(part, "rb+") as fh:
-        os.fsync(fh.fileno())
-    os.replace(part, path)
 
 
 def import_mit_dataset(
@@ -528,6 +518,7 @@ def import_mit_dataset(
     skipped = len(plan) - len(todo)
     total = sum(len(o["files"]) for i in todo for o in plan[i])
 
+    from rich.console import Console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
 
     renderers: dict[str, MitRenderer] = {}
@@ -539,6 +530,7 @@ def import_mit_dataset(
             MofNCompleteColumn(),
             TimeRemainingColumn(),
             disable=not progress,
+            console=Console(stderr=True),  # progress on stderr, results on stdout
         ) as bar:
             task = bar.add_task(f"importing MIT Push ({skipped} shards already done)", total=total)
             for i in todo:

@@ -4,17 +4,22 @@ One file per shard, `shard-NNNNN.h5`, written to `*.h5.tmp` and renamed when com
 finished shard is never half-written. Layout:
 
     /                       attrs: schema_version, pushtoknow_version, fingerprint, shard_index,
-                                   sim_config (JSON), complete=True
+                                   sim_config (JSON), complete=True, content_sha256
     /objects/<i>            attrs: spec (JSON), params (5,) SI, object_index
     /objects/<i>/pushes/<k> attrs: action (5,) [cp_x, cp_y, pd, v, profile index], profile
         time (T,) s · pose (T, 3) x, y, θ (unwrapped) · tactile (T, 3) F_x, F_y (N), contact
         force_clean (T, 2) N · pusher (T, 2) m · s0 (H, W) bool
         rgb (T, H, W, 3) uint8 · depth (T, H, W) float16 metres (±0.3 mm at 0.75 m)
-Image datasets are chunked one frame per chunk and gzip-compressed.
+Image datasets are chunked one frame per chunk and gzip-compressed. Integrity: every dataset
+carries HDF5's Fletcher-32 checksum (a corrupt chunk fails to read, naming the dataset), and
+`content_sha256` digests the objects' attributes and arrays (`content_digest`), so
+`verify_shard` (`dataset info --verify`, and resume before it skips a finished shard) finds
+corruption anywhere in them. Shards written without a digest are checked for readability only.
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 from dataclasses import dataclass
@@ -34,7 +39,9 @@ SCHEMA_VERSION = 1
 SHARD_GLOB = "shard-*.h5"
 GENERATION_FILE = "generation.json"  # a generated dataset's provenance: its config and plan
 RUN_PUSHES = "pushes"  # subfolder of an `infer` / `demo` output holding the executed pushes
-COMPRESSION = {"compression": "gzip", "compression_opts": 4, "shuffle": True}
+CHECKSUM = {"fletcher32": True}
+COMPRESSION = {"compression": "gzip", "compression_opts": 4, "shuffle": True, **CHECKSUM}
+DIGEST_ATTR = "content_sha256"
 
 
 def shard_path(out: Path, index: int) -> Path:
@@ -56,9 +63,13 @@ def write_shard(
     shard_index: int,
     sim_config_json: str,
     attrs: dict | None = None,
+    object_attrs: list[dict] | None = None,
+    push_attrs: list[list[dict]] | None = None,
 ) -> None:
     """Write a shard atomically (temp file, fsync, rename). `attrs`: extra root attributes
-    (e.g. the push policy and model of `pushtoknow collect`)."""
+    (e.g. the push policy and model of `pushtoknow collect`); `object_attrs`, `push_attrs`:
+    extra attributes per episode and per push of each episode (e.g. an import's provenance),
+    covered by the content digest like the rest."""
     path = Path(path)
     tmp = path.with_suffix(".h5.tmp")
     with h5py.File(tmp, "w") as f:
@@ -72,25 +83,28 @@ def write_shard(
         )
         f.attrs.update(attrs or {})
         objs = f.create_group("objects")
-        for ep in episodes:
+        for e, ep in enumerate(episodes):
             g = objs.create_group(str(ep.object_index))
             g.attrs.update(
                 spec=ep.spec.to_json(),
                 params=ep.spec.params.as_array(),
                 object_index=ep.object_index,
             )
+            g.attrs.update(object_attrs[e] if object_attrs else {})
             pushes = g.create_group("pushes")
             for k, r in enumerate(ep.records):
                 p = pushes.create_group(str(k))
                 p.attrs.update(action=r.push.as_array(), profile=r.push.profile)
+                p.attrs.update(push_attrs[e][k] if push_attrs else {})
                 for name in ("time", "pose", "tactile", "force_clean", "pusher"):
-                    p.create_dataset(name, data=getattr(r, name))
+                    p.create_dataset(name, data=getattr(r, name), **CHECKSUM)
                 p.create_dataset("s0", data=r.s0, **COMPRESSION)
                 T, H, W = r.depth.shape
                 p.create_dataset("rgb", data=r.rgb, chunks=(1, H, W, 3), **COMPRESSION)
                 p.create_dataset(
                     "depth", data=r.depth.astype(np.float16), chunks=(1, H, W), **COMPRESSION
                 )
+        f.attrs[DIGEST_ATTR] = content_digest(tmp, objs)
         f.attrs["complete"] = True
         f.flush()
     with open(tmp, "rb+") as fh:
@@ -122,8 +136,53 @@ def open_shard(path: Path) -> h5py.File:
     return f
 
 
+def _digest_value(h, value) -> None:
+    a = np.asarray(value)
+    h.update(f"{a.dtype.str}{a.shape}".encode())
+    h.update(a.tobytes() if a.dtype != object else repr(a.tolist()).encode())
+
+
+def content_digest(path: Path, objects: h5py.Group) -> str:
+    """SHA-256 (hex) of a shard's /objects: every group's attributes and every array, in sorted
+    order. Reading the arrays checks their Fletcher-32 checksums on the way (DatasetError)."""
+    h = hashlib.sha256()
+
+    def visit(name: str, node) -> None:
+        h.update(name.encode())
+        for key in sorted(node.attrs):
+            h.update(key.encode())
+            _digest_value(h, node.attrs[key])
+        if isinstance(node, h5py.Dataset):
+            _digest_value(h, _read(path, node.parent, node.name.rsplit("/", 1)[-1]))
+
+    h.update(b"objects")
+    for key in sorted(objects.attrs):
+        _digest_value(h, objects.attrs[key])
+    objects.visititems(visit)  # h5py visits in name order
+    return h.hexdigest()
+
+
+def verify_shard(path: Path) -> bool:
+    """Read every array of a shard and compare its content digest. Returns True when the digest
+    matches, False when the shard has none (an older writer: only readability was checked);
+    raises DatasetError naming the shard when it is corrupt."""
+    with open_shard(path) as f:
+        digest = content_digest(path, f["objects"])
+        stored = f.attrs.get(DIGEST_ATTR)
+    if stored is None:
+        return False
+    if str(stored) != digest:
+        raise DatasetError(
+            path,
+            "corrupt: its content does not match the digest written with it; move it away and "
+            "rerun the command that wrote it to write it again",
+        )
+    return True
+
+
 def shard_is_finished(path: Path, fingerprint: str) -> bool:
-    """True if a complete shard written with this fingerprint exists at `path` (resume).
+    """True if a complete, intact shard written with this fingerprint exists at `path`
+    (resume; its content is verified, `verify_shard`).
 
     Raises DatasetError naming the file if it is corrupt or was written with other settings.
     """
@@ -136,6 +195,7 @@ def shard_is_finished(path: Path, fingerprint: str) -> bool:
                 "written with other settings (objects, source files, seed or config differ); "
                 "use another --out directory",
             )
+    verify_shard(path)
     return True
 
 
@@ -163,7 +223,7 @@ def read_shard(path: Path, images: bool = True) -> list[ObjectEpisode]:
         for key in sorted(f["objects"], key=int):
             g = f["objects"][key]
             try:
-                spec = ObjectSpec.from_dict(json.loads(g.attrs["spec"]))
+                spec = ObjectSpec.from_dict(json.loads(g.attrs["spec"]), stored=True)
             except (KeyError, json.JSONDecodeError) as e:
                 raise DatasetError(path, f"object {key}: unreadable spec ({e})") from None
             recs = [read_push(path, g["pushes"][k], images) for k in sorted(g["pushes"], key=int)]
@@ -197,13 +257,16 @@ def list_shards(root: Path) -> list[Path]:
     return sorted(root.glob(SHARD_GLOB))
 
 
-def dataset_info(root: Path) -> dict:
+def dataset_info(root: Path, verify: bool = False) -> dict:
     """Summary of a dataset directory: schema_version, testbed_version (the physics the pushes
     were simulated with, docs/PHYSICS.md), shards, objects, expected_objects and complete (from
-    its GENERATION_FILE; None without one), pushes, steps, bytes."""
+    its GENERATION_FILE; None without one), pushes, steps, bytes; with `verify`, every shard's
+    content is checked first (`verify_shard`; DatasetError names the first corrupt one) and
+    verified_shards counts those with a matching digest (the others have none)."""
     shards = list_shards(root)
     if not shards:
         raise DatasetError(root, f"no {SHARD_GLOB} files")
+    verified = sum(verify_shard(s) for s in shards) if verify else None
     objects = pushes = steps = 0
     testbed_versions = set()
     profiles: dict[str, int] = {}
@@ -239,4 +302,5 @@ def dataset_info(root: Path) -> dict:
         "profiles": profiles,
         "image_shape": image_shape,
         "bytes": int(sum(s.stat().st_size for s in shards)),
+        **({} if verified is None else {"verified_shards": verified}),
     }

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 from scipy.stats import norm
+from shapely.geometry import Point
 
 from pushtoknow.common.params import PARAM_NAMES, PARAM_RANGES
 
@@ -63,7 +64,8 @@ def coverage(zscores: np.ndarray, level: float = 0.9) -> dict:
 
 def impossible_estimates(mean: np.ndarray, footprints: list) -> int:
     """How many estimates (object, push) describe no possible object: m, μ or I_z not positive,
-    the CoM outside the object's footprint, or I_z above the most any mass distribution inside
+    the CoM outside the convex hull of the object's footprint (where no mass distribution over it
+    puts its CoM; `Footprint.com_region`), or I_z above the most any mass distribution inside
     the footprint can have (m · max ‖p − c‖²). mean: (N, K, 5) SI; footprints: N
     `testbed.shapes.Footprint` (the true ones)."""
     idx = {k: PARAM_NAMES.index(k) for k in PARAM_NAMES}
@@ -77,7 +79,7 @@ def impossible_estimates(mean: np.ndarray, footprints: list) -> int:
                 and m > 0
                 and mu > 0
                 and iz > 0
-                and fp.contains(com)
+                and fp.com_region().covers(Point(*com))
                 and iz <= m * fp.max_radius_from(com) ** 2
             )
             count += not possible

@@ -208,8 +208,8 @@ def render_report(results: dict, command: str, appendices: list[str] = ()) -> st
         "coverage = share of (object, parameter) pairs inside the method's equal-tailed interval "
         "(the filter's is Gaussian in its normalised, log-space parameters, so asymmetric in SI; "
         "the forest's and the prior's are Gaussian in SI); impossible = estimates (objects × "
-        "(pushes + 1)) with m, μ or I_z not positive, the CoM outside the true footprint or I_z "
-        "above m·max‖p − c‖².",
+        "(pushes + 1)) with m, μ or I_z not positive, the CoM outside the true footprint's convex "
+        "hull or I_z above m·max‖p − c‖².",
         "",
     ]
     for set_name, title in (("heldout", "Held-out catalogue objects"), ("novel", "Novel objects")):

@@ -9,6 +9,7 @@ the filter's constraints (invalid sigma points are projected first, see `filters
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from typing import Any
 
 import torch
 from torch import nn
@@ -18,7 +19,7 @@ class DynamicsModel(nn.Module, ABC):
     """Process model: pose change and heteroscedastic diagonal process noise per sigma point."""
 
     @abstractmethod
-    def forward(self, states: torch.Tensor, context: object) -> tuple[torch.Tensor, torch.Tensor]:
+    def forward(self, states: torch.Tensor, context: Any) -> tuple[torch.Tensor, torch.Tensor]:
         """states (B, C, D) → (delta_pose (B, C, P), q_diag (B, C, P) ≥ 0).
 
         Units: pose change in m, m, rad over one filter step; q_diag is the variance of the
@@ -37,7 +38,7 @@ class ObservationModel(nn.Module, ABC):
     angle_indices: tuple[int, ...] = ()
 
     @abstractmethod
-    def forward(self, states: torch.Tensor, context: object) -> torch.Tensor:
+    def forward(self, states: torch.Tensor, context: Any) -> torch.Tensor:
         """states (B, C, D) → predicted observations (B, C, M)."""
 
 
@@ -47,7 +48,7 @@ class ObservationNoiseModel(nn.Module, ABC):
     obs_dim: int
 
     @abstractmethod
-    def forward(self, observation: torch.Tensor, context: object) -> torch.Tensor:
+    def forward(self, observation: torch.Tensor, context: Any) -> torch.Tensor:
         """observation z (B, M) (finite) → r_diag (B, M) > 0, variances in the units of z²."""
 
 
@@ -59,5 +60,5 @@ class PoseObservation(ObservationModel):
         self.obs_dim = pose_dim
         self.angle_indices = tuple(angle_indices)
 
-    def forward(self, states: torch.Tensor, context: object) -> torch.Tensor:
+    def forward(self, states: torch.Tensor, context: Any) -> torch.Tensor:
         return states[..., : self.obs_dim]

@@ -14,7 +14,7 @@ import yaml
 from pushtoknow.common.errors import DatasetError, IdentificationError, ObjectSpecError
 from pushtoknow.identification.replay import ReplayScene
 from pushtoknow.testbed.config import SimConfig, stored_sim_config
-from pushtoknow.testbed.objects import NOVEL_SHAPES, resolve_shape
+from pushtoknow.testbed.objects import NOVEL_SHAPES, recentred_legacy_shape, resolve_shape
 from pushtoknow.testbed.shapes import CATALOGUE_SHAPES, footprint_from_shape
 from pushtoknow.testbed.sim import PushRecord
 
@@ -109,7 +109,9 @@ def load_recorded_objects(path: Path) -> list[RecordedObject]:
                     RecordedObject(
                         name=str(d.get("name", f"object {key}")),
                         index=int(g.attrs.get("object_index", key)),
-                        shape=resolve_shape(shape) if shape is not None else None,
+                        shape=resolve_shape(recentred_legacy_shape(shape))
+                        if shape is not None
+                        else None,
                         height=float(d.get("height", 0.013)),
                         truth=truth,
                         records=records,
@@ -174,7 +176,7 @@ def footprint_from_mask(obj: RecordedObject) -> tuple[dict, tuple[float, float]]
     if poly.geom_type != "Polygon" or poly.area <= 0:
         raise IdentificationError(f"{obj.name}: the mask S_0 gives no simple footprint")
     centroid = poly.centroid
-    verts = np.asarray(poly.exterior.coords)[:-1]
+    verts = np.asarray(poly.exterior.coords)[:-1] - np.array([centroid.x, centroid.y])
     return {"type": "polygon", "vertices": verts.tolist()}, (centroid.x, centroid.y)
 
 

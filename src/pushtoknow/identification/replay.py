@@ -80,7 +80,7 @@ def feasible(phi: np.ndarray, footprint: Footprint) -> tuple[np.ndarray, float, 
     below the most this footprint allows, μ below the testbed's limit. Returns (φ, CoM moved
     (m), excess: Σ (value / bound − 1) over I_z and μ where above their bound)."""
     phi = np.array(phi, dtype=np.float64)
-    region = footprint.polygon.buffer(-(COM_MARGIN + COM_INSET))
+    region = footprint.com_region(COM_MARGIN + COM_INSET)
     c = Point(phi[2], phi[3])
     moved = 0.0
     if not region.contains(c):

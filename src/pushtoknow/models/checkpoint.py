@@ -24,6 +24,7 @@ from pushtoknow.common.errors import CheckpointError
 from pushtoknow.filters.base import BeliefFilter, FilterConfig
 from pushtoknow.filters.gaussian import symmetrize
 from pushtoknow.models.learned import (
+    FilterKind,
     LearnedModels,
     LearnedModelsConfig,
     ScaledObservationNoise,
@@ -37,7 +38,7 @@ CHECKPOINT_VERSION = 2  # 2: m, μ and I_z normalised through their logarithm (c
 CHECKPOINT_FILE = "model.pt"
 
 Variant = Literal["vt-addf", "vt-jdf", "v-ddf"]
-FILTER_KIND = {"vt-addf": "dual", "vt-jdf": "joint", "v-ddf": "vision_only"}
+FILTER_KIND: dict[str, FilterKind] = {"vt-addf": "dual", "vt-jdf": "joint", "v-ddf": "vision_only"}
 
 
 RANGE_MARGIN = 0.05  # normalised: 2.5% of a catalogue range (ParamPrior.covering_range)

@@ -22,8 +22,9 @@ Encoder modes (`EncodingConfig.mode`):
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import Literal, overload
 
 import torch
 import torch.nn.functional as F
@@ -62,6 +63,20 @@ POSE_DIM = 3
 NUM_POSE_FEATURES = 12  # (x - x0)/L, (y - y0)/L, sin, cos, δx/L, δy/L, δθ, pad (5)
 SPEED_SCALE = 0.1  # m/s, normalises the push speed feature
 PAD_RADIUS = 0.005  # m: the testbed's pad (kept equal to `PadConfig.radius` by a test)
+
+
+FilterKind = Literal["dual", "joint", "vision_only"]
+
+
+@overload
+def _map_field(t: torch.Tensor, fn: Callable[[torch.Tensor], torch.Tensor]) -> torch.Tensor: ...
+@overload
+def _map_field(
+    t: torch.Tensor | None, fn: Callable[[torch.Tensor], torch.Tensor]
+) -> torch.Tensor | None: ...
+def _map_field(t, fn):
+    """fn applied to a context field, which may be None."""
+    return None if t is None else fn(t)
 
 
 @dataclass(frozen=True)
@@ -139,8 +154,8 @@ class PushContext:
     def to(self, dtype: torch.dtype | None = None, device: torch.device | str | None = None):
         """A copy with every tensor moved to dtype/device."""
 
-        def mv(t: torch.Tensor | None) -> torch.Tensor | None:
-            return None if t is None else t.to(device=device, dtype=dtype)
+        def mv(t):
+            return _map_field(t, lambda x: x.to(device=device, dtype=dtype))
 
         return PushContext(
             mv(self.mask0),
@@ -265,8 +280,8 @@ class ShapeActionEncoding(nn.Module):
 
 
 def _repeat_context(context: PushContext, times: int) -> PushContext:
-    def rep(t: torch.Tensor | None) -> torch.Tensor | None:
-        return None if t is None else t.repeat_interleave(times, dim=0)
+    def rep(t):
+        return _map_field(t, lambda x: x.repeat_interleave(times, dim=0))
 
     return PushContext(
         rep(context.mask0),
@@ -468,7 +483,7 @@ class LearnedModels:
 
     dynamics: DynamicsModel
     observation: ObservationModel
-    observation_noise: LearnedObservationNoise
+    observation_noise: ObservationNoiseModel
 
     def modules(self) -> nn.ModuleList:
         return nn.ModuleList([self.dynamics, self.observation, self.observation_noise])
@@ -528,7 +543,7 @@ def _physics_models(
 
 
 def build_filter(
-    kind: Literal["dual", "joint", "vision_only"] = "dual",
+    kind: FilterKind = "dual",
     models: LearnedModels | None = None,
     models_config: LearnedModelsConfig = LearnedModelsConfig(),
     filter_config: FilterConfig = FilterConfig(),

@@ -141,6 +141,10 @@ class ProcessNet(nn.Module):
     """features (..., input_dim), enc (..., enc_dim) (broadcastable leading axes)
     → (Δψ (..., P), q_diag (..., P) ≥ floor)."""
 
+    delta_scale: torch.Tensor  # buffers, registered in __init__
+    q_scale: torch.Tensor
+    q_floor_std: torch.Tensor
+
     def __init__(self, config: ProcessNetConfig = ProcessNetConfig()):
         super().__init__()
         self.config = config
@@ -220,6 +224,10 @@ class ObsNoiseNetConfig(Config):
 class ObsNoiseNet(nn.Module):
     """z (N, M) → r_diag (N, M) ≥ std_floor² (units of z²)."""
 
+    input_scale: torch.Tensor  # buffers, registered in __init__
+    std_scale: torch.Tensor
+    std_floor: torch.Tensor
+
     def __init__(self, config: ObsNoiseNetConfig = ObsNoiseNetConfig()):
         super().__init__()
         self.config = config
@@ -288,7 +296,7 @@ class VisNet(nn.Module):
         if backbone is None:
             conv, _ = _conv_stack(c.in_channels, c.channels, c.kernel_sizes, c.strides)
             side = _conv_out_size(c.image_size, c.kernel_sizes, c.strides)
-            self.backbone = nn.Sequential(conv, nn.Flatten(1))
+            self.backbone: nn.Module = nn.Sequential(conv, nn.Flatten(1))
             feat = c.channels[-1] * side * side
         else:
             if backbone_dim is None:
@@ -352,6 +360,10 @@ class PhysicsProcessNet(nn.Module):
 
     geom (..., G), dyn (..., G + K), gate (...), enc (..., E) → (Δψ (..., P), q_diag (..., P)).
     """
+
+    delta_scale: torch.Tensor  # buffers, registered in __init__
+    q_scale: torch.Tensor
+    q_floor_std: torch.Tensor
 
     def __init__(self, config: ProcessNetConfig, geom_dim: int, dyn_dim: int):
         super().__init__()

@@ -11,6 +11,13 @@ Specs are read from JSON/YAML:
     inertia: 0.9e-3         # kg·m² about the vertical axis through the CoM
 
 Catalogue objects are addressable as ``catalogue:ID`` (ID in 0..824).
+
+The vertices of a `polygon` shape are given in the object frame too, about their area centroid:
+an off-centroid polygon is refused with its offset, since moving it silently would leave the
+CoM in another frame. What the testbed simulates faithfully (docs/DESIGN.md §3) bounds a spec:
+mass ≤ `MAX_MASS`, footprint width ≥ `MIN_WIDTH` and radius ≤ `MAX_RADIUS`, height ≥
+`MIN_HEIGHT`, the CoM inside the footprint's convex hull (`COM_MARGIN`), I_z below what the
+footprint allows.
 """
 
 from __future__ import annotations
@@ -24,13 +31,34 @@ from pathlib import Path
 
 import numpy as np
 import yaml
+from shapely.geometry import Point
 
 from pushtoknow.common.errors import ObjectSpecError
 from pushtoknow.common.params import CATALOGUE_GRID, PARAM_RANGES, ObjectParams
-from pushtoknow.testbed.shapes import CATALOGUE_SHAPES, Footprint, footprint_from_shape
+from pushtoknow.testbed.config import CameraConfig, PadConfig
+from pushtoknow.testbed.shapes import (
+    CATALOGUE_SHAPES,
+    Footprint,
+    about_centroid,
+    footprint_from_shape,
+    polygon_centroid,
+)
 
 DEFAULT_HEIGHT = 0.013  # m, extrusion height (the MIT Push objects are 13 mm thick)
-COM_MARGIN = 0.005  # m, the CoM must lie at least this far inside the footprint
+# m: the CoM lies at least this far inside the footprint's convex hull. Any mass distribution
+# over the footprint has its CoM in that hull (a non-convex footprint's notch included); the
+# testbed's supports sit 2 mm inside the outline (SupportConfig.edge_margin) and carry any CoM
+# 3 mm inside the hull with positive loads.
+COM_MARGIN = 0.003
+CATALOGUE_COM_MARGIN = 0.005  # m: catalogue and sampled objects keep the CoM this far inside
+# the footprint itself (the catalogue's rule, stricter than physics)
+POLYGON_CENTROID_TOLERANCE = 1e-6  # m: a polygon's centroid may sit this far from the origin
+_VIEW_HALF_WIDTH = CameraConfig().distance * math.tan(math.radians(CameraConfig().fovy_deg) / 2)
+MAX_RADIUS = 0.2  # m, centroid to the farthest footprint point: the object and a 0.1 m push
+# stay inside the camera's view (±0.31 m on the table)
+MIN_WIDTH = 0.03  # m, the footprint's smallest width: narrower objects span under 3 pixels of
+# the 64-pixel camera (9.7 mm per pixel), too few for a footprint from S_0
+MIN_HEIGHT = PadConfig().z + PadConfig().half_height  # m: lower objects pass under the pad's top
 MAX_MASS = 30.0  # kg: heavier objects are not simulated faithfully. Measured on rect1 at μ = 0.5
 # and 20 mm/s: the pad sinks 0.16 mm into 30 kg (below the 0.5 mm pose noise), 0.5 mm into
 # 100 kg and 4.9 mm into 1000 kg, and it passes through 10⁶ kg
@@ -49,7 +77,11 @@ class ObjectSpec:
     footprint: Footprint = field(init=False, repr=False, compare=False)
 
     def __post_init__(self):
-        fp = footprint_from_shape(resolve_shape(self.shape))
+        shape = resolve_shape(self.shape)
+        fp = footprint_from_shape(shape)
+        if shape.get("type") == "polygon":
+            check_polygon_frame(shape["vertices"])
+        validate_footprint(fp)
         object.__setattr__(self, "footprint", fp)
         validate_params(self.params, fp, self.height)
 
@@ -69,7 +101,9 @@ class ObjectSpec:
         return json.dumps(self.to_dict())
 
     @classmethod
-    def from_dict(cls, d: dict) -> ObjectSpec:
+    def from_dict(cls, d: dict, stored: bool = False) -> ObjectSpec:
+        """A spec from its mapping (module docstring). `stored`: read from a dataset, where an
+        older writer may have kept a polygon off its centroid (`recentred_legacy_shape`)."""
         if not isinstance(d, dict):
             raise ObjectSpecError("<root>", d, "an object spec must be a mapping")
         unknown = set(d) - {"name", "shape", "mass", "friction", "com", "inertia", "height"}
@@ -89,7 +123,7 @@ class ObjectSpec:
             inertia=_number("inertia", d["inertia"]),
         )
         return cls(
-            shape=d["shape"],
+            shape=recentred_legacy_shape(d["shape"]) if stored else d["shape"],
             params=params,
             height=_number("height", d.get("height", DEFAULT_HEIGHT)),
             name=str(d.get("name", "object")),
@@ -117,6 +151,54 @@ def resolve_shape(shape) -> dict:
             )
         return CATALOGUE_SHAPES[shape]
     return shape
+
+
+def check_polygon_frame(vertices) -> None:
+    """Refuse polygon vertices whose area centroid is not the object frame's origin (the CoM is
+    given in that frame, so the polygon must be too)."""
+    offset = polygon_centroid(vertices)
+    if np.hypot(*offset) > POLYGON_CENTROID_TOLERANCE:
+        x, y = 1e3 * offset
+        raise ObjectSpecError(
+            "shape.vertices",
+            f"centroid at ({x:.3f}, {y:.3f}) mm",
+            "the object frame has its origin at the footprint's centroid: give the vertices "
+            f"and the com about it (subtract ({x:.3f}, {y:.3f}) mm from both)",
+        )
+
+
+def recentred_legacy_shape(shape):
+    """A stored spec's polygon moved about its centroid. Datasets written before polygons had
+    to be given about their centroid kept such vertices with the CoM already in the centroid
+    frame, so only the vertices move."""
+    if isinstance(shape, dict) and shape.get("type") == "polygon":
+        try:
+            return {**shape, "vertices": about_centroid(shape["vertices"])}
+        except (TypeError, ValueError):
+            return shape  # refused with its reason by ObjectSpec
+    return shape
+
+
+def validate_footprint(fp: Footprint) -> None:
+    """Refuse footprints the testbed cannot simulate faithfully (size bounds, see the module
+    docstring), naming the bound."""
+    radius = fp.max_radius_from((0.0, 0.0))
+    if radius > MAX_RADIUS:
+        raise ObjectSpecError(
+            "shape",
+            f"radius {radius:.3f} m",
+            f"too large: beyond {MAX_RADIUS} m from its centroid the object leaves the camera's "
+            f"view (±{_VIEW_HALF_WIDTH:.2f} m) while pushed",
+        )
+    rect = fp.polygon.minimum_rotated_rectangle
+    xy = np.asarray(rect.exterior.coords)[:3]
+    width = float(min(np.linalg.norm(xy[1] - xy[0]), np.linalg.norm(xy[2] - xy[1])))
+    if width < MIN_WIDTH:
+        raise ObjectSpecError(
+            "shape",
+            f"width {width:.4f} m",
+            f"too small: narrower than {MIN_WIDTH} m the object spans under 3 camera pixels",
+        )
 
 
 def inertia_upper_bound(mass: float, footprint: Footprint, com) -> float:
@@ -147,12 +229,17 @@ def validate_params(p: ObjectParams, footprint: Footprint, height: float = DEFAU
         )
     if p.friction > 2.0:
         raise ObjectSpecError("friction", p.friction, "implausible Coulomb coefficient (> 2)")
+    if height < MIN_HEIGHT:
+        raise ObjectSpecError(
+            "height", height, f"below {MIN_HEIGHT:.4f} m the pad passes over the object"
+        )
     com = (p.com_x, p.com_y)
-    if not footprint.contains(com, margin=COM_MARGIN):
+    if not footprint.com_region(COM_MARGIN).contains(Point(*com)):
         raise ObjectSpecError(
             "com",
             list(com),
-            f"centre of mass must lie inside the footprint (margin {COM_MARGIN} m)",
+            "no mass distribution over this footprint has its centre of mass there (it must "
+            f"lie inside the footprint's convex hull, {COM_MARGIN * 1e3:g} mm from its edge)",
         )
     bound = inertia_upper_bound(p.mass, footprint, com)
     if p.inertia > bound:
@@ -161,6 +248,16 @@ def validate_params(p: ObjectParams, footprint: Footprint, height: float = DEFAU
             p.inertia,
             f"exceeds the largest inertia {bound:.3e} kg·m² possible for mass {p.mass} kg "
             "inside this footprint",
+        )
+
+
+def validate_catalogue_params(p: ObjectParams, footprint: Footprint) -> None:
+    """`validate_params` and the catalogue's own rule: the CoM at least `CATALOGUE_COM_MARGIN`
+    inside the footprint (catalogue and sampled objects)."""
+    validate_params(p, footprint)
+    if not footprint.contains((p.com_x, p.com_y), margin=CATALOGUE_COM_MARGIN):
+        raise ObjectSpecError(
+            "com", [p.com_x, p.com_y], f"not {CATALOGUE_COM_MARGIN} m inside the footprint"
         )
 
 
@@ -212,7 +309,7 @@ def build_catalogue(seed: int = CATALOGUE_SEED, per_shape: int = CATALOGUE_PER_S
         for i in order:
             p = ObjectParams.from_array(combos[i])
             try:
-                validate_params(p, fp)
+                validate_catalogue_params(p, fp)
             except ObjectSpecError:
                 rejected += 1
                 continue
@@ -276,19 +373,23 @@ NOVEL_SHAPES: dict[str, dict] = {
     },
     "trapezoid": {
         "type": "polygon",
-        "vertices": [[-0.065, -0.045], [0.065, -0.045], [0.035, 0.045], [-0.035, 0.045]],
+        "vertices": about_centroid(
+            [[-0.065, -0.045], [0.065, -0.045], [0.035, 0.045], [-0.035, 0.045]]
+        ),
     },
     "ellip4": {"type": "ellipse", "a": 0.045, "b": 0.09},
     "l_shape": {  # non-convex: decomposed into convex pieces for collision
         "type": "polygon",
-        "vertices": [
-            [-0.055, -0.055],
-            [0.055, -0.055],
-            [0.055, -0.005],
-            [-0.005, -0.005],
-            [-0.005, 0.055],
-            [-0.055, 0.055],
-        ],
+        "vertices": about_centroid(
+            [
+                [-0.055, -0.055],
+                [0.055, -0.055],
+                [0.055, -0.005],
+                [-0.005, -0.005],
+                [-0.005, 0.055],
+                [-0.055, 0.055],
+            ]
+        ),
     },
 }
 
@@ -311,7 +412,7 @@ def sample_continuous_object(
         ]
         p = ObjectParams(*vals)
         try:
-            validate_params(p, fp)
+            validate_catalogue_params(p, fp)
         except ObjectSpecError:
             continue
         spec_shape = shape if shape in CATALOGUE_SHAPES else shape_dict

@@ -60,6 +60,12 @@ class Footprint:
         poly = self.polygon
         return bool(poly.contains(p)) and poly.exterior.distance(p) >= margin
 
+    def com_region(self, margin: float = 0.0) -> Polygon:
+        """Where a centre of mass can lie: the convex hull of the footprint (any mass
+        distribution over it has its CoM there, a non-convex footprint's notch included),
+        shrunk by `margin` (m)."""
+        return self.polygon.convex_hull.buffer(-margin)
+
     def max_radius_from(self, xy) -> float:
         """Largest distance from xy to any point of the footprint (m)."""
         return float(np.max(np.linalg.norm(self.vertices - np.asarray(xy)[None], axis=1)))
@@ -85,9 +91,20 @@ def _ccw(v: np.ndarray) -> np.ndarray:
     return v if signed > 0 else v[::-1].copy()
 
 
+def polygon_centroid(vertices) -> np.ndarray:
+    """Area centroid (2,) of a simple polygon's vertices (m)."""
+    c = Polygon(np.asarray(vertices, dtype=np.float64)).centroid
+    return np.array([c.x, c.y])
+
+
+def about_centroid(vertices) -> list[list[float]]:
+    """The polygon's vertices moved so that its area centroid is the origin (object frame)."""
+    v = np.asarray(vertices, dtype=np.float64)
+    return (v - polygon_centroid(v)).tolist()
+
+
 def _centre(v: np.ndarray) -> np.ndarray:
-    c = Polygon(v).centroid
-    return v - np.array([c.x, c.y])
+    return v - polygon_centroid(v)
 
 
 def _positive(field: str, value) -> float:

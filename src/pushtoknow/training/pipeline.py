@@ -162,6 +162,7 @@ def train_model(
     echo=None,
 ) -> TrainedModel:
     """Train `cfg.variant` on the dataset in `data`; write the run to `out` (see module doc)."""
+    from rich.console import Console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn
 
     data, out = Path(data), Path(out)
@@ -185,6 +186,7 @@ def train_model(
         MofNCompleteColumn(),
         TimeElapsedColumn(),
         disable=not progress,
+        console=Console(stderr=True),  # progress on stderr, results on stdout
     ) as bar:
         # 1. VisNet
         t0 = time.perf_counter()
