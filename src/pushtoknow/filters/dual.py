@@ -3,6 +3,8 @@ conditional UKF pose update on a joint Gaussian belief over s = (ψ, φ̃)."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import torch
 
 from pushtoknow.filters.base import BeliefFilter, FilterConfig, FilterNoise, UpdateInfo
@@ -33,7 +35,7 @@ from pushtoknow.filters.liu_west import (
     sanitise_log_likelihood,
     tempering_exponent,
 )
-from pushtoknow.filters.ukf import ukf_update
+from pushtoknow.filters.ukf import UKFUpdateResult, ukf_update
 
 
 def regression_slope(
@@ -132,7 +134,8 @@ class DualFilter(BeliefFilter):
         noise: FilterNoise | None = None,
         generator: torch.Generator | None = None,
     ) -> tuple[torch.Tensor, torch.Tensor, UpdateInfo]:
-        """Posterior (mean (B, D), cov (B, D, D), info) given the predicted belief and z (B, M)."""
+        """Posterior (mean (B, D), cov (B, D, D), info) given the predicted belief and z (B, M):
+        the stages of the class docstring, each a function of this module."""
         cfg = self.config
         b = self._check_belief(mean, cov)
         self._check_context(context, b)
@@ -140,23 +143,67 @@ class DualFilter(BeliefFilter):
         if noise.update is None or noise.update.shape[0] < 1:
             raise ValueError("the dual update needs noise.update of shape (S ≥ 1, B, C, D)")
         p = cfg.pose_dim
-        marginal = cfg.param_weighting == "marginal"
         z, valid, r_diag = self._observation_and_noise(observation, context, mean)
         angles = self.observation.angle_indices
 
-        # -- predicted conditional N(ψ | φ): slope G and covariance Σ_ψ|φ --------------------
-        pose_mean, param_mean_bar = mean[:, :p], mean[:, p:]
-        chol_phi_bar = safe_cholesky(cov[:, p:, p:], cfg.cholesky, "predicted Σ_φ")
-        slope = torch.cholesky_solve(cov[:, p:, :p], chol_phi_bar).mT  # G (B, P, K)
-        cond_cov = symmetrize(cov[:, :p, :p] - slope @ cov[:, p:, :p])
-        if marginal:  # h over N(ψ | φ = μ̄_φ), evaluated together with the stage-0 points
-            ut_states = self._unscented_points(pose_mean, cond_cov, param_mean_bar)
-        weight_noise = r_diag
+        cond = conditional_pose(cov, p, cfg)
+        params = self._parameter_update(mean, cov, cond, z, valid, r_diag, context, noise)
 
-        # -- parameter update (Liu–West) with the ESS guard ------------------------------
+        def observe(pose_points: torch.Tensor) -> torch.Tensor:
+            fixed = params.mean.unsqueeze(1).expand(-1, pose_points.shape[1], -1)
+            return self._predict_observations(torch.cat([pose_points, fixed], -1), context)
+
+        ukf = ukf_update(
+            cond.mean_given(mean, params.mean),
+            cond.cov,
+            z,
+            observe,
+            r_diag,
+            cfg.sigma_points,
+            cfg.pose_angle_indices,
+            angles,
+            cfg.cholesky,
+        )
+        total = None
+        if cfg.cross_covariance == "updated":
+            total = total_observation_slope(
+                params.first_points, params.first_obs, cond.slope, p, cfg, angles
+            )
+        post_mean, post_cov = reassemble_joint(ukf, params, cov[:, :p, p:], cond.slope, total, cfg)
+        keep = valid.view(b, 1)
+        post_mean = torch.where(keep, post_mean, mean)
+        post_cov = torch.where(keep.unsqueeze(-1), post_cov, cov)
+        info = UpdateInfo(
+            weights=params.weights, ess=params.ess, stages=params.stages, skipped=~valid
+        )
+        return post_mean, post_cov, info
+
+    def _parameter_update(
+        self,
+        mean: torch.Tensor,
+        cov: torch.Tensor,
+        cond: ConditionalPose,
+        z: torch.Tensor,
+        valid: torch.Tensor,
+        r_diag: torch.Tensor,
+        context: object,
+        noise: FilterNoise,
+    ) -> ParameterPosterior:
+        """Stage 1: the Liu–West parameter update with the ESS guard (class docstring) on the
+        predicted belief N(mean (B, D), cov (B, D, D)), z (B, M), R = diag(r_diag) (B, M)."""
+        cfg = self.config
+        p = cfg.pose_dim
+        b = mean.shape[0]
+        marginal = cfg.param_weighting == "marginal"
+        angles = self.observation.angle_indices
+        pose_mean, param_mean_bar = mean[:, :p], mean[:, p:]
+        if marginal:  # h over N(ψ | φ = μ̄_φ), evaluated together with the stage-0 points
+            ut_states = self._unscented_points(pose_mean, cond.cov, param_mean_bar)
+        weight_noise = r_diag
         stage_mean, stage_cov = (param_mean_bar, cov[:, p:, p:]) if marginal else (mean, cov)
         remaining = torch.ones(b, dtype=mean.dtype, device=mean.device)
         stages = torch.zeros(b, dtype=torch.long, device=mean.device)
+        assert noise.update is not None  # checked by `update`
         num_stages = min(noise.update.shape[0], cfg.max_tempering_stages)
         for stage in range(num_stages):
             eps = noise.update[stage].to(mean.dtype)
@@ -164,7 +211,9 @@ class DualFilter(BeliefFilter):
             chol = safe_cholesky(stage_cov, cfg.cholesky, "tempering-stage covariance")
             drawn = sample_gaussian(stage_mean, chol, eps)  # (B, C, K) or (B, C, D)
             if marginal:
-                pose_hat = pose_mean.unsqueeze(1) + (drawn - param_mean_bar.unsqueeze(1)) @ slope.mT
+                pose_hat = pose_mean.unsqueeze(1) + (drawn - param_mean_bar.unsqueeze(1)) @ (
+                    cond.slope.mT
+                )
                 points = torch.cat([pose_hat, drawn], dim=-1)
             else:
                 points = drawn
@@ -197,52 +246,104 @@ class DualFilter(BeliefFilter):
             stage_mean = weighted_mean(drawn, weights)
             stage_cov = weighted_covariance(drawn, weights, stage_mean)
         param_mean, param_cov, _ = liu_west_moments(points[..., p:], weights, cfg.liu_west_h)
-        ess = effective_sample_size(log_w)
-
-        # -- pose update: condition on φ = μ_φ, then UKF ---------------------------------
-        cond_mean = pose_mean + ((param_mean - param_mean_bar).unsqueeze(1) @ slope.mT).squeeze(1)
-
-        def observe(pose_points: torch.Tensor) -> torch.Tensor:
-            fixed = param_mean.unsqueeze(1).expand(-1, pose_points.shape[1], -1)
-            return self._predict_observations(torch.cat([pose_points, fixed], -1), context)
-
-        ukf = ukf_update(
-            cond_mean,
-            cond_cov,
-            z,
-            observe,
-            r_diag,
-            cfg.sigma_points,
-            cfg.pose_angle_indices,
-            angles,
-            cfg.cholesky,
+        return ParameterPosterior(
+            param_mean,
+            param_cov,
+            weights,
+            effective_sample_size(log_w),
+            stages,
+            first_points,
+            first_obs,
         )
 
-        # -- joint reassembly bel(ψ|φ) bel(φ) ---------------------------------------------
-        cross = cov[:, :p, p:]  # C = Σ̄_ψφ
-        if cfg.cross_covariance == "kept":
-            chol_phi = safe_cholesky(param_cov, cfg.cholesky, "parameter posterior Σ_φ")
-            reg = torch.cholesky_solve(cross.mT, chol_phi)  # Σ_φ⁻¹ Cᵀ
-            pose_cov = symmetrize(ukf.cov + cross @ reg)
-        else:
-            if marginal:  # the points vary along ψ̂(φ): their slope is the total derivative
-                total = regression_slope(first_points[..., p:], first_obs, angles, cfg.cholesky)
-            else:  # h ≈ H_ψ ψ + H_φ φ: total derivative along ψ̂(φ) is H_ψ G + H_φ
-                h = regression_slope(first_points, first_obs, angles, cfg.cholesky)
-                total = h[..., :p] @ slope + h[..., p:]
-            slope_post = slope - ukf.gain @ total
-            cross = slope_post @ param_cov
-            pose_cov = symmetrize(ukf.cov + cross @ slope_post.mT)
-        post_mean = torch.cat([ukf.mean, param_mean], dim=-1)
-        post_cov = torch.cat(
-            [torch.cat([pose_cov, cross], -1), torch.cat([cross.mT, param_cov], -1)],
-            dim=-2,
-        )
-        keep = valid.view(b, 1)
-        post_mean = torch.where(keep, post_mean, mean)
-        post_cov = torch.where(keep.unsqueeze(-1), post_cov, cov)
-        info = UpdateInfo(weights=weights, ess=ess, stages=stages, skipped=~valid)
-        return post_mean, post_cov, info
+
+@dataclass(frozen=True)
+class ConditionalPose:
+    """The predicted N(ψ | φ) of a joint Gaussian over s = (ψ, φ): E[ψ | φ] = μ̄_ψ + G (φ − μ̄_φ)
+    with slope G = Σ̄_ψφ Σ̄_φ⁻¹ (B, P, K), covariance Σ_ψ|φ = Σ̄_ψψ − G Σ̄_φψ (B, P, P)."""
+
+    slope: torch.Tensor
+    cov: torch.Tensor
+
+    def mean_given(self, mean: torch.Tensor, params: torch.Tensor) -> torch.Tensor:
+        """E[ψ | φ = params] (B, P) for the joint mean (B, D) and params (B, K)."""
+        p = self.cov.shape[-1]
+        shift = (params - mean[:, p:]).unsqueeze(1) @ self.slope.mT
+        return mean[:, :p] + shift.squeeze(1)
+
+
+def conditional_pose(cov: torch.Tensor, pose_dim: int, cfg: FilterConfig) -> ConditionalPose:
+    """Stage 0: N(ψ | φ) of the predicted belief with covariance cov (B, D, D)."""
+    p = pose_dim
+    chol_phi_bar = safe_cholesky(cov[:, p:, p:], cfg.cholesky, "predicted Σ_φ")
+    slope = torch.cholesky_solve(cov[:, p:, :p], chol_phi_bar).mT  # G (B, P, K)
+    return ConditionalPose(slope, symmetrize(cov[:, :p, :p] - slope @ cov[:, p:, :p]))
+
+
+@dataclass(frozen=True)
+class ParameterPosterior:
+    """Stage 1's result: the parameters' posterior mean (B, K) and cov (B, K, K), the final
+    weights (B, C), ESS (B,) and stages used (B,), and the stage-0 points (B, C, D) with their
+    predicted observations (B, C, M) (samples of the predicted belief, to linearise h)."""
+
+    mean: torch.Tensor
+    cov: torch.Tensor
+    weights: torch.Tensor
+    ess: torch.Tensor
+    stages: torch.Tensor
+    first_points: torch.Tensor
+    first_obs: torch.Tensor
+
+
+def total_observation_slope(
+    points: torch.Tensor,
+    obs: torch.Tensor,
+    slope: torch.Tensor,
+    pose_dim: int,
+    cfg: FilterConfig,
+    obs_angle_indices: tuple[int, ...] = (),
+) -> torch.Tensor:
+    """D = d h(ψ̂(φ), φ) / dφ (B, M, K): the total slope of the observation along the
+    conditional mean pose ψ̂(φ), by statistical linear regression over the stage-0 points
+    (B, C, D) and their observations (B, C, M). Marginal weighting draws the points along
+    ψ̂(φ), so their slope is the total one; joint samples give h ≈ H_ψ ψ + H_φ φ, and
+    D = H_ψ G + H_φ."""
+    p = pose_dim
+    if cfg.param_weighting == "marginal":
+        return regression_slope(points[..., p:], obs, obs_angle_indices, cfg.cholesky)
+    h = regression_slope(points, obs, obs_angle_indices, cfg.cholesky)
+    return h[..., :p] @ slope + h[..., p:]
+
+
+def reassemble_joint(
+    ukf: UKFUpdateResult,
+    params: ParameterPosterior,
+    prior_cross: torch.Tensor,
+    slope: torch.Tensor,
+    total_slope: torch.Tensor | None,
+    cfg: FilterConfig,
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """Stage 3: the joint posterior bel(ψ | φ) bel(φ) (mean (B, D), cov (B, D, D)) from the
+    UKF's conditional pose posterior, the parameters' posterior and, per
+    `cfg.cross_covariance` (class docstring), the predicted cross-covariance C = Σ̄_ψφ (B, P, K)
+    ("kept") or the slopes G (B, P, K) and D (B, M, K) ("updated")."""
+    if cfg.cross_covariance == "kept":
+        chol_phi = safe_cholesky(params.cov, cfg.cholesky, "parameter posterior Σ_φ")
+        reg = torch.cholesky_solve(prior_cross.mT, chol_phi)  # Σ_φ⁻¹ Cᵀ
+        cross = prior_cross
+        pose_cov = symmetrize(ukf.cov + cross @ reg)
+    else:
+        if total_slope is None:
+            raise ValueError("the 'updated' reassembly needs the total observation slope")
+        slope_post = slope - ukf.gain @ total_slope
+        cross = slope_post @ params.cov
+        pose_cov = symmetrize(ukf.cov + cross @ slope_post.mT)
+    post_mean = torch.cat([ukf.mean, params.mean], dim=-1)
+    post_cov = torch.cat(
+        [torch.cat([pose_cov, cross], -1), torch.cat([cross.mT, params.cov], -1)],
+        dim=-2,
+    )
+    return post_mean, post_cov
 
 
 def vision_only_filter(
