@@ -15,6 +15,7 @@ RANKS = {
     "datasets": 3,
     "filters": 3,
     "models": 4,
+    "perception": 4.5,  # the footprint seen in S_0 and VisNet's measurement
     "active": 5,
     "baselines": 5,
     "training": 6,
@@ -60,4 +61,18 @@ def test_no_module_imports_a_higher_layer():
             other = _layer(name)
             if other in RANKS and RANKS[other] > RANKS[own]:
                 bad.append(f"{rel} imports {name}")
+    assert not bad, "\n".join(bad)
+
+
+# Sideways imports that the ranks allow but the design does not: running a model never needs
+# the trainer (what both need from the camera lives in `perception`).
+FORBIDDEN = {("inference", "training"), ("identification", "training")}
+
+
+def test_forbidden_sideways_imports():
+    bad = []
+    for path in ROOT.rglob("*.py"):
+        rel = path.relative_to(ROOT)
+        own = rel.parts[0] if len(rel.parts) > 1 else rel.stem
+        bad += [f"{rel} imports {n}" for n in _imports(path) if (own, _layer(n)) in FORBIDDEN]
     assert not bad, "\n".join(bad)

@@ -8,7 +8,7 @@ from pydantic import ValidationError
 from pushtoknow.active.policies import (
     ActiveConfig,
     ActivePolicy,
-    PushPolicy,
+    CandidateSelector,
     look_ahead_steps,
 )
 from pushtoknow.testbed.push import Push
@@ -29,7 +29,7 @@ def test_active_policy_picks_the_informative_push(score):
     filt = linear_filter()
     policy = ActivePolicy(filt, horizon_steps=20, score=score, horizon_fraction=0.25)
     assert policy.name == f"active-{score}" and policy.n_steps == 5
-    assert isinstance(policy, PushPolicy)
+    assert isinstance(policy, CandidateSelector)
     candidates = [Push((0.0, 0.0), 0.0, speed=s) for s in (0.0, 0.01, 0.02, 0.005)]
     mean, cov = linear_prior()
     calls: list = []

@@ -45,6 +45,13 @@ CASES = [
         "centroid at (33.333, 33.333) mm",
     ),
     (["dataset", "info", "{tmp}/garbage", "--verify"], "shard-00000.h5"),
+    (
+        ["evaluate", "--data", "{tmp}/empty", "--models", "pretrained", "--out", "{tmp}/e"],
+        "no shard",
+    ),
+    (["evaluate-heldout", "--objects", "2", "--policy", "greedy"], "'--policy'"),
+    (["infer", "--object", "catalogue:3", "--model", "{tmp}/taken"], "not a readable pushtoknow"),
+    (["infer", "--object", "{tmp}/broken.yaml"], "line 2"),
     (["identify", "--pushes", "{tmp}/nowhere"], "no such dataset directory"),
     (["identify", "--pushes", "{tmp}", "--config", "{tmp}/missing.yaml"], "missing.yaml"),
     (["identify", "--pushes", "{tmp}", "--config", "{tmp}/broken.yaml"], "not valid YAML"),
@@ -68,6 +75,7 @@ def test_bad_input_exits_2_with_a_message_not_a_traceback(
 ):
     (tmp_path / "broken.yaml").write_text("a: [\n")
     (tmp_path / "garbage").mkdir()
+    (tmp_path / "empty").mkdir()
     (tmp_path / "garbage" / "shard-00000.h5").write_bytes(b"\x89HDF garbage" * 10)
     (tmp_path / "unknown.yaml").write_text("huber_k: 3\n")
     taken = tmp_path / "taken"
@@ -75,6 +83,8 @@ def test_bad_input_exits_2_with_a_message_not_a_traceback(
     code, text = _run(monkeypatch, capsys, [a.replace("{tmp}", str(tmp_path)) for a in args])
     assert code == 2, text
     assert needle in text and "Traceback" not in text
+    errors = [ln for ln in text.splitlines() if ln.startswith("error:")]
+    assert len(errors) == 1 and needle in errors[0], text  # one line, usage errors too
     assert taken.read_text() == "keep me"
 
 

@@ -7,10 +7,10 @@ import pytest
 import torch
 
 from pushtoknow.common.params import PARAM_NAMES
+from pushtoknow.inference.policies import make_policy
 from pushtoknow.inference.session import (
     InferenceConfig,
     ObjectEstimator,
-    active_scorer,
     infer_object,
 )
 from pushtoknow.models.checkpoint import load_checkpoint
@@ -52,7 +52,6 @@ def infer(model, spec, policy="uniform", seed=0, pushes=PUSHES, profiles=("const
     try:
         ex.observe()  # as the CLI does: places the object, sets initial_pose
         cfg = InferenceConfig(pushes=pushes, policy=policy, candidates=4, profiles=profiles)
-        scorer = active_scorer(policy, SIM) if policy.startswith("active") else None
         seen = []
         result = infer_object(
             model,
@@ -63,7 +62,7 @@ def infer(model, spec, policy="uniform", seed=0, pushes=PUSHES, profiles=("const
             truth=spec.params.as_array(),
             object_name=spec.name,
             on_push=seen.append,
-            active_scorer=scorer,
+            policy=make_policy(policy, SIM),
         )
     finally:
         ex.close()
@@ -148,13 +147,17 @@ def test_policies_run(model, spec, policy):
         check_estimate(e, k + 1)
 
 
-def test_active_policy_without_scorer_is_refused(model, spec):
+def test_the_configured_policy_is_made_with_the_models_testbed_settings(model, spec):
+    """Without a policy object, infer_object makes the configured one (an active one too,
+    with the model's testbed settings) and it chooses among the candidates."""
     ex = SimulatedExecutor(spec, SIM, seed=0, recentre=True)
     try:
-        with pytest.raises(ValueError, match="active"):
-            infer_object(model, ex, InferenceConfig(pushes=1, policy="active-kl"))
+        ex.observe()
+        cfg = InferenceConfig(pushes=1, policy="active-entropy", candidates=3)
+        res = infer_object(model, ex, cfg, 0, initial_pose=ex.initial_pose)
     finally:
         ex.close()
+    assert len(res.estimates) == 1 and res.estimates[0].push is not None
 
 
 def test_recentring_keeps_theta_and_reports_the_move(uniform_run):
@@ -198,34 +201,66 @@ def test_uniform_policy_cycles_through_the_speed_profiles(model, spec):
         check_estimate(e, k + 1)
 
 
-def test_choose_push_profiles_for_random_and_active():
-    from pushtoknow.inference.session import choose_push, profile_speeds
+def test_policies_choose_among_candidates_of_both_profiles():
+    from pushtoknow.inference.policies import (
+        PushDecision,
+        PushPolicy,
+        RandomPolicy,
+        UniformPolicy,
+        candidate_pushes,
+    )
+    from pushtoknow.inference.session import profile_speeds
     from pushtoknow.testbed.executor import SimulatedExecutor
+
+    class PicksRelease(PushPolicy):  # an active policy's part: the index it scores highest
+        name = "picks-release"
+
+        def choose(self, d):
+            return d.candidates[[c.profile for c in d.candidates].index("release")]
 
     ex = SimulatedExecutor(load_object_spec("catalogue:117"), SIM, seed=0, recentre=True)
     try:
         view = ex.observe()
         speeds = profile_speeds(SIM)
         both = ("constant", "release")
-        seen = []
 
-        def active(cands):
-            seen.extend(c.profile for c in cands)
-            return [c.profile for c in cands].index("release")
+        def decision(seed, profiles=both, k=0):
+            rng = np.random.default_rng(seed)
+            cands, cp = candidate_pushes(view, ex.camera, 6, rng, speeds, profiles)
+            return PushDecision(k, 5, cands, cp, view, ex.camera, ex.initial_pose, rng,
+                                profiles, speeds, None)  # fmt: skip
 
-        args = (view, ex.camera, 0, 5, ex.initial_pose)
-        push = choose_push("active-kl", *args, np.random.default_rng(0), speeds, 6, active, both)
+        d = decision(0)
+        assert [c.profile for c in d.candidates] == ["constant", "release"] * 3
+        push = PicksRelease().choose(d)
         assert push.profile == "release" and push.speed == speeds["release"]
-        assert seen == ["constant", "release"] * 3  # the policy chooses among both
-        drawn = {
-            choose_push("random", *args, np.random.default_rng(s), speeds, 6, None, both).profile
-            for s in range(12)
-        }
-        assert drawn == set(both)
-        only = choose_push("random", *args, np.random.default_rng(0), speeds, 6)
+        assert {RandomPolicy().choose(decision(s)).profile for s in range(12)} == set(both)
+        only = RandomPolicy().choose(decision(0, ("constant",)))
         assert only.profile == "constant" and only.speed == speeds["constant"]
+        # uniform cycles through the profiles push by push
+        assert [UniformPolicy().choose(decision(0, k=k)).profile for k in range(4)] == [
+            "constant", "release", "constant", "release",
+        ]  # fmt: skip
     finally:
         ex.close()
+
+
+def test_policies_are_made_by_name():
+    from typing import get_args
+
+    from pushtoknow.common.policies import POLICY_NAMES
+    from pushtoknow.inference.policies import InformationPolicy, make_policy
+    from pushtoknow.inference.session import InferenceConfig
+
+    assert POLICY_NAMES == get_args(InferenceConfig.model_fields["policy"].annotation)
+    for name in POLICY_NAMES:
+        assert make_policy(name, SIM).name == name
+    assert make_policy("active-entropy", SIM).score == "entropy"
+    assert isinstance(make_policy("active-kl", SIM), InformationPolicy)
+    with pytest.raises(ValueError, match="sim_config"):
+        make_policy("active-kl")
+    with pytest.raises(ValueError, match="uniform, random, active-kl, active-entropy"):
+        make_policy("greedy")
 
 
 def test_profiles_the_model_never_saw_are_refused(model, spec):

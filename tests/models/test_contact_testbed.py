@@ -8,11 +8,11 @@ import torch
 from pushtoknow.geometry.affordances import sample_push_affordances
 from pushtoknow.models.contact import limit_surface_push, radius_of_gyration
 from pushtoknow.models.physics import CONTACT_REACH, CONTACT_SOFTNESS, MOMENT_ARM_RATIO
+from pushtoknow.perception.footprint import footprint_from_mask
 from pushtoknow.testbed.config import SimConfig
 from pushtoknow.testbed.executor import SimulatedExecutor
 from pushtoknow.testbed.objects import load_object_spec
 from pushtoknow.testbed.push import Push
-from pushtoknow.training.data import footprint_from_mask
 
 F64 = torch.float64
 

@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 import torch
 
-from pushtoknow.inference.session import InferenceConfig, active_scorer, infer_object
+from pushtoknow.inference.policies import make_policy
+from pushtoknow.inference.session import InferenceConfig, infer_object
 from pushtoknow.models.checkpoint import load_checkpoint
 from pushtoknow.models.physics import PhysicsDynamics, PhysicsObservation
 from pushtoknow.testbed.executor import SimulatedExecutor
@@ -52,7 +53,7 @@ def test_physics_structured_model_trains_reloads_and_estimates(
             cfg,
             0,
             initial_pose=ex.initial_pose,
-            active_scorer=active_scorer("active-kl", SIM),
+            policy=make_policy("active-kl", SIM),
         )
     finally:
         ex.close()

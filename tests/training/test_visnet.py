@@ -7,20 +7,15 @@ import pytest
 import torch
 
 from pushtoknow.datasets.generate import GenerationConfig, generate_dataset
+from pushtoknow.perception.footprint import FOOTPRINT_VERTICES, footprint_from_mask
+from pushtoknow.perception.visnet import visnet_inputs
 from pushtoknow.testbed.config import PushConfig, SimConfig
-from pushtoknow.training.data import (
-    FOOTPRINT_VERTICES,
-    dataset_camera,
-    footprint_from_mask,
-    load_frames,
-    load_push_tensors,
-)
+from pushtoknow.training.data import dataset_camera, load_frames, load_push_tensors
 from pushtoknow.training.visnet import (
     VisNetTrainConfig,
     evaluate_visnet,
     perturb,
     train_visnet,
-    visnet_inputs,
 )
 
 

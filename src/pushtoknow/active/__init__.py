@@ -9,8 +9,8 @@ from pushtoknow.active.policies import (
     ACTIVE_POLICY_NAMES,
     ActiveConfig,
     ActivePolicy,
+    CandidateSelector,
     ContextBuilder,
-    PushPolicy,
     look_ahead_steps,
 )
 from pushtoknow.active.scores import entropy_reduction, kl_information_gain, log_det
@@ -26,8 +26,8 @@ __all__ = [
     "SCORES",
     "ActiveConfig",
     "ActivePolicy",
+    "CandidateSelector",
     "ContextBuilder",
-    "PushPolicy",
     "draw_common_noise",
     "entropy_reduction",
     "expected_update_covariance",

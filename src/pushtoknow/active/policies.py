@@ -26,7 +26,7 @@ ContextBuilder = Callable[[Sequence["Push"], int], object]
 """(pushes, step) ↦ the filter context of look-ahead step `step` for `pushes`, batched over
 len(pushes) (step k is the transition from sample k to k + 1)."""
 
-ACTIVE_POLICY_NAMES: dict[str, str] = {"kl": "active-kl", "entropy": "active-entropy"}
+ACTIVE_POLICY_NAMES: dict[ScoreName, str] = {"kl": "active-kl", "entropy": "active-entropy"}
 
 
 class ActiveConfig(Config):
@@ -58,8 +58,8 @@ def look_ahead_steps(horizon_fraction: float, horizon_steps: int) -> int:
 
 
 @runtime_checkable
-class PushPolicy(Protocol):
-    """Chooses the next push among candidates."""
+class CandidateSelector(Protocol):
+    """Chooses the next push among candidates, given the belief (an active policy's part)."""
 
     name: str
 

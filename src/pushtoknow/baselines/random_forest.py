@@ -192,11 +192,15 @@ def features_from_dataset(root, pose_fn=None):
     push number within its object (N,)."""
     import json
 
+    from pushtoknow.common.errors import DatasetError
     from pushtoknow.datasets.shards import list_shards, read_shard
     from pushtoknow.testbed.config import SimConfig
 
+    shards = list_shards(root)
+    if not shards:
+        raise DatasetError(root, "no shard-*.h5 files: the forest has no training pushes")
     X, Y, obj, k = [], [], [], []
-    for s in list_shards(root):
+    for s in shards:
         import h5py
 
         with h5py.File(s, "r") as f:

@@ -15,8 +15,14 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
-from pushtoknow.cli.options import SEED_HELP, seed_option, sigma_points_option
-from pushtoknow.common.errors import IdentificationError, PushToKnowError
+from pushtoknow.cli.options import (
+    SEED_HELP,
+    PolicyChoice,
+    policy_option,
+    seed_option,
+    sigma_points_option,
+)
+from pushtoknow.common.errors import IdentificationError, PushToKnowError, first_line
 from pushtoknow.testbed.push import PROFILES
 
 ProfileName = enum.Enum("ProfileName", {p: p for p in PROFILES}, type=str)  # CLI choices
@@ -260,7 +266,7 @@ def evaluate_heldout_cmd(
         88, "--objects", min=1, max=88, help="held-out catalogue objects (≤ 88)"
     ),
     pushes: int = typer.Option(5, "--pushes", min=1),
-    policy: str = typer.Option("uniform", "--policy"),
+    policy: PolicyChoice = policy_option(),
     seed: int = seed_option(),
     workers: int = typer.Option(2, "--workers", min=1),
     out: Path = typer.Option(None, "--out", help="write the metrics JSON here"),
@@ -270,6 +276,7 @@ def evaluate_heldout_cmd(
     """NRMSE after each of K pushes on held-out catalogue objects (the catalogue's test split),
     with the prior-mean predictor and the coverage of the 68% / 90% intervals."""
     profile_names = None if profiles is None else _profiles(profiles)
+    policy_name = policy.value
     import numpy as np
     from rich.progress import Progress
 
@@ -294,7 +301,7 @@ def evaluate_heldout_cmd(
             path,
             ids,
             pushes,
-            policy,
+            policy_name,
             seed,
             workers,
             progress=lambda: bar.advance(task),
@@ -304,7 +311,7 @@ def evaluate_heldout_cmd(
     metrics.update(
         {
             "model": str(path),
-            "policy": policy,
+            "policy": policy_name,
             "profiles": list(profile_names),
             "pushes": pushes,
             "seed": seed,
@@ -323,7 +330,7 @@ def evaluate_heldout_cmd(
     )
     if _save_and_print_json(metrics, out, as_json):
         return
-    t = Table(title=f"NRMSE on {n} held-out objects ({policy}, seed {seed})")
+    t = Table(title=f"NRMSE on {n} held-out objects ({policy_name}, seed {seed})")
     for c in ["after push", *PARAM_NAMES, "overall", "μ·m", "coverage90"]:
         t.add_column(c, justify="right")
     fmt = lambda r: [f"{r[k]:.3f}" for k in (*PARAM_NAMES, "overall", "mu_m")]  # noqa: E731
@@ -357,6 +364,7 @@ def ablate_profiles_cmd(
     when the policy may or may not use release pushes, on the same held-out objects."""
     from rich.progress import Progress
 
+    from pushtoknow.common.policies import POLICY_NAMES
     from pushtoknow.evaluation.heldout import heldout_object_ids
     from pushtoknow.evaluation.profiles import (
         DEFAULT_CONDITIONS,
@@ -364,13 +372,12 @@ def ablate_profiles_cmd(
         profiles_markdown,
         run_profile_ablation,
     )
-    from pushtoknow.inference.session import POLICIES
     from pushtoknow.pretrained import resolve_model_path
 
     conds = [parse_condition(c) for c in conditions] if conditions else list(DEFAULT_CONDITIONS)
     for policy, profiles in conds:
-        if policy not in POLICIES:
-            raise typer.BadParameter(f"--condition policy must be one of {', '.join(POLICIES)}")
+        if policy not in POLICY_NAMES:
+            raise typer.BadParameter(f"--condition policy must be one of {', '.join(POLICY_NAMES)}")
         _profiles(",".join(profiles))
     ids = heldout_object_ids(objects, seed)
     with Progress(console=err_console) as bar:
@@ -657,20 +664,13 @@ def run_inference(
     """Shared by `infer` and `demo`: K pushes on the testbed, tables, plot, JSON. profiles:
     None for those the model was trained on."""
     from pushtoknow.datasets.shards import write_run_pushes
-    from pushtoknow.inference.session import (
-        POLICIES,
-        InferenceConfig,
-        active_scorer,
-        infer_object,
-    )
+    from pushtoknow.inference.session import InferenceConfig, infer_object
     from pushtoknow.models.checkpoint import load_checkpoint
     from pushtoknow.pretrained import resolve_model_path
     from pushtoknow.testbed.executor import SimulatedExecutor
     from pushtoknow.testbed.objects import load_object_spec
     from pushtoknow.viz import plot_estimates, save_push_strip
 
-    if policy not in POLICIES:
-        raise typer.BadParameter(f"--policy must be one of {', '.join(POLICIES)}")
     model = load_checkpoint(resolve_model_path(model_ref))
     spec = load_object_spec(object_ref)
     truth = spec.params.as_array()
@@ -681,11 +681,6 @@ def run_inference(
         policy=policy,
         num_sigma_points=sigma_points,
         profiles=model.profiles if profiles is None else profiles,
-    )
-    scorer = (
-        active_scorer(policy, sim_cfg, cfg.active_horizon_fraction)
-        if policy.startswith("active")
-        else None
     )
     ex = SimulatedExecutor(spec, sim_cfg, seed=seed, recentre=True)
     show.print(
@@ -706,7 +701,6 @@ def run_inference(
             truth=truth,
             object_name=spec.name or "",
             on_push=on_push,
-            active_scorer=scorer,
         )
     finally:
         ex.close()
@@ -733,9 +727,7 @@ def infer(
     model: str = typer.Option("pretrained", "--model", help="RUN directory or 'pretrained'"),
     obj: str = typer.Option(..., "--object", help="catalogue:ID, a JSON/YAML file or JSON"),
     pushes: int = typer.Option(5, "--pushes", min=1),
-    policy: str = typer.Option(
-        "uniform", "--policy", help="uniform | random | active-kl | active-entropy"
-    ),
+    policy: PolicyChoice = policy_option(),
     seed: int = seed_option(),
     out: Path = typer.Option(Path("infer-out"), "--out", help="where the plot and JSON go"),
     as_json: bool = typer.Option(False, "--json", help="print the estimates as JSON"),
@@ -747,7 +739,7 @@ def infer(
         model,
         obj,
         pushes,
-        policy,
+        policy.value,
         seed,
         out,
         as_json,
@@ -775,9 +767,7 @@ def demo(
 @app.command()
 def collect(
     model: str = typer.Option(..., "--model", help="RUN directory, model.pt or 'pretrained'"),
-    policy: str = typer.Option(
-        ..., "--policy", help="uniform | random | active-kl | active-entropy"
-    ),
+    policy: PolicyChoice = policy_option(None, "push policy (required)"),
     objects: int = typer.Option(4, "--objects", min=1),
     pushes: int = typer.Option(2, "--pushes", min=1, help="pushes per object"),
     seed: int = seed_option(),
@@ -797,16 +787,15 @@ def collect(
     """Collect training data with a push policy and a trained model (the filter runs, so active
     policies choose each push for the current belief); writes shards like `simulate`."""
     from pushtoknow.collection.collect import collect_dataset
-    from pushtoknow.inference.session import POLICIES
     from pushtoknow.pretrained import resolve_model_path
 
-    if policy not in POLICIES:
-        _fail(ValueError(f"--policy must be one of {', '.join(POLICIES)}, got {policy!r}"))
+    if policy is None:
+        raise typer.BadParameter("--policy is required")
     try:
         res = collect_dataset(
             out,
             resolve_model_path(model),
-            policy,
+            policy.value,
             objects_from,
             objects,
             pushes,
@@ -820,7 +809,7 @@ def collect(
         _fail(e)
     console.print(
         f"wrote {res['shards_written']} shards, skipped {res['shards_skipped']} finished ones "
-        f"({res['objects']} objects × {pushes} pushes, {policy}) → {out}"
+        f"({res['objects']} objects × {pushes} pushes, {policy.value}) → {out}"
     )
 
 
@@ -1035,10 +1024,12 @@ def identify_bench_cmd(
 
 
 def error_message(e: BaseException) -> str | None:
-    """The one-line message of an error a user can cause (bad input, files, disk), or None
-    for a bug (which keeps its traceback)."""
+    """The one-line message of an error a user can cause (bad options, input, files, disk), or
+    None for a bug (which keeps its traceback)."""
+    if hasattr(e, "format_message") and getattr(e, "exit_code", None) == 2:  # a usage error
+        return f"{first_line(e.format_message())} (see --help)"
     if isinstance(e, PushToKnowError):
-        return str(e)
+        return first_line(e)
     if isinstance(e, OSError) and e.strerror:
         where = f"{e.filename}: " if e.filename else ""
         return f"{where}{e.strerror.lower()}"
@@ -1047,10 +1038,16 @@ def error_message(e: BaseException) -> str | None:
 
 def main() -> None:  # pragma: no cover - the installed entry point; tests call it in process
     try:
-        app()
+        code = app(standalone_mode=False)  # errors come here, to be told in one line
+    except typer.Abort:
+        err_console.print("aborted")
+        sys.exit(130)
     except Exception as e:
+        if type(e).__name__ == "NoArgsIsHelpError":  # no command: the help was printed
+            sys.exit(2)
         message = error_message(e)
         if message is None:
             raise
-        err_console.print(f"[bold red]error:[/] {message}")
+        err_console.print(f"[bold red]error:[/] {message}", highlight=False)
         sys.exit(2)
+    sys.exit(code if isinstance(code, int) else 0)

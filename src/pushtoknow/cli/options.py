@@ -2,7 +2,11 @@
 
 from __future__ import annotations
 
+import enum
+
 import typer
+
+from pushtoknow.common.policies import POLICY_NAMES
 
 SEED_HELP = "random seed (≥ 0): same seed, same result on the CPU"
 MIN_SIGMA_POINTS = 10
@@ -16,3 +20,12 @@ def seed_option(default: int | None = 0, help: str = SEED_HELP):
 def sigma_points_option(default: int | None = None, help: str = "default: the model's"):
     """The `--sigma-points` option of every command that runs the filter."""
     return typer.Option(default, "--sigma-points", min=MIN_SIGMA_POINTS, help=help)
+
+
+PolicyChoice = enum.Enum("PolicyChoice", {p: p for p in POLICY_NAMES}, type=str)  # CLI choices
+
+
+def policy_option(default: str | None = "uniform", help: str = "push policy"):
+    """The `--policy` option of every command that pushes with a policy (choices from
+    `inference.policies.POLICY_NAMES`)."""
+    return typer.Option(None if default is None else PolicyChoice(default), "--policy", help=help)

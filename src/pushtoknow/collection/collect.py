@@ -37,6 +37,7 @@ from pydantic import Field
 
 from pushtoknow.common.config import Config
 from pushtoknow.common.errors import DatasetError
+from pushtoknow.common.policies import POLICY_NAMES, PolicyName
 from pushtoknow.datasets.generate import (
     GENERATION_FILE,
     prepare_dataset_dir,
@@ -50,7 +51,6 @@ from pushtoknow.datasets.shards import (
     shard_path,
     write_shard,
 )
-from pushtoknow.inference.session import POLICIES, Policy
 from pushtoknow.testbed.config import SimConfig
 from pushtoknow.testbed.objects import ObjectSpec
 
@@ -63,7 +63,7 @@ class CollectionConfig(Config):
 
     model: str = Field(..., description="checkpoint path (provenance only)")
     model_sha256: str
-    policy: Policy
+    policy: PolicyName
     objects_from: str = "catalogue-train"
     objects: int = Field(4, gt=0)
     pushes: int = Field(2, gt=0)
@@ -80,8 +80,8 @@ class CollectionConfig(Config):
 
 
 def check_policy(policy: str) -> str:
-    if policy not in POLICIES:
-        raise ValueError(f"policy must be one of {', '.join(POLICIES)}, got {policy!r}")
+    if policy not in POLICY_NAMES:
+        raise ValueError(f"policy must be one of {', '.join(POLICY_NAMES)}, got {policy!r}")
     return policy
 
 
@@ -107,7 +107,8 @@ def collection_objects(cfg: CollectionConfig) -> list[ObjectSpec]:
 
 def collect_object(model, spec: ObjectSpec, index: int, cfg: CollectionConfig) -> ObjectEpisode:
     """K pushes on one object chosen by `cfg.policy` with `model`'s filter running."""
-    from pushtoknow.inference.session import InferenceConfig, active_scorer, infer_object
+    from pushtoknow.inference.policies import make_policy
+    from pushtoknow.inference.session import InferenceConfig, infer_object
     from pushtoknow.testbed.executor import SimulatedExecutor
 
     rng = np.random.default_rng([cfg.seed, 3, index])
@@ -118,11 +119,7 @@ def collect_object(model, spec: ObjectSpec, index: int, cfg: CollectionConfig) -
         candidates=cfg.candidates,
         num_sigma_points=cfg.num_sigma_points,
     )
-    scorer = (
-        active_scorer(cfg.policy, cfg.sim, icfg.active_horizon_fraction)
-        if cfg.policy.startswith("active")
-        else None
-    )
+    policy = make_policy(cfg.policy, cfg.sim, icfg.active_horizon_fraction)  # the executor's
     ex = SimulatedExecutor(spec, cfg.sim, seed=ex_seed, recentre=True)
     try:
         res = infer_object(
@@ -132,7 +129,7 @@ def collect_object(model, spec: ObjectSpec, index: int, cfg: CollectionConfig) -
             inf_seed,
             initial_pose=ex.initial_pose,
             truth=spec.params.as_array(),
-            active_scorer=scorer,
+            policy=policy,
         )
     finally:
         ex.close()

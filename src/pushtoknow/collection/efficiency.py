@@ -61,7 +61,7 @@ from pydantic import Field, field_validator
 
 from pushtoknow.common.config import Config
 from pushtoknow.common.errors import DatasetError
-from pushtoknow.inference.session import POLICIES, Policy
+from pushtoknow.common.policies import POLICY_NAMES, PolicyName
 from pushtoknow.testbed.config import SimConfig
 from pushtoknow.training.pipeline import TrainConfig
 
@@ -88,7 +88,7 @@ class EfficiencyConfig(Config):
     initial: DataBlock = DataBlock(objects=40, pushes=2)
     rounds: int = Field(3, ge=1)
     round: DataBlock = DataBlock(objects=40, pushes=2)
-    policies: tuple[Policy, ...] = ("uniform", "random", "active-entropy")
+    policies: tuple[PolicyName, ...] = ("uniform", "random", "active-entropy")
     seeds: tuple[int, ...] = (0, 1)
     validation: ValidationSet = ValidationSet()
     sim: SimConfig = SimConfig()
@@ -116,8 +116,8 @@ class EfficiencyConfig(Config):
     @classmethod
     def _known_policies(cls, v):
         for p in [v] if isinstance(v, str) else v:
-            if p not in POLICIES:
-                raise ValueError(f"policy must be one of {', '.join(POLICIES)}, got {p!r}")
+            if p not in POLICY_NAMES:
+                raise ValueError(f"policy must be one of {', '.join(POLICY_NAMES)}, got {p!r}")
         return v
 
     @field_validator("policies", "seeds")
@@ -153,9 +153,10 @@ def validation_loss(model_dir: Path, val_data: Path, cfg: EfficiencyConfig, seed
     """The validation metrics of the model in `model_dir` on the dataset `val_data` (see the
     module docstring), cached in `model_dir/validation.json`."""
     from pushtoknow.models.checkpoint import load_checkpoint
+    from pushtoknow.perception.visnet import visnet_measure
     from pushtoknow.training.data import compute_vision_poses, load_push_tensors
     from pushtoknow.training.end_to_end import evaluate_filter
-    from pushtoknow.training.visnet import perturb, visnet_measure
+    from pushtoknow.training.visnet import perturb
 
     cache = Path(model_dir) / "validation.json"
     if cache.exists():

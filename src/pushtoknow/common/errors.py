@@ -5,6 +5,23 @@ class PushToKnowError(Exception):
     """Base class of every error the project raises on purpose."""
 
 
+def first_line(e: BaseException) -> str:
+    """The first non-empty line of an exception's message (a library's explanation can run over
+    many lines; a one-line error keeps its head)."""
+    return next((ln.strip() for ln in str(e).splitlines() if ln.strip()), type(e).__name__)
+
+
+def yaml_error_summary(e: Exception) -> str:
+    """'not valid JSON/YAML (line N: problem)' for a yaml.YAMLError."""
+    mark = getattr(e, "problem_mark", None)
+    problem = getattr(e, "problem", None) or first_line(e)
+    return (
+        f"not valid JSON/YAML (line {mark.line + 1}: {problem})"
+        if mark
+        else f"not valid JSON/YAML ({problem})"
+    )
+
+
 class ObjectSpecError(PushToKnowError, ValueError):
     """An object description is invalid; the message names the field and the value."""
 

@@ -40,7 +40,7 @@ class HeldoutRun:
 def _run_one(args) -> dict:
     import time
 
-    from pushtoknow.inference.session import InferenceConfig, active_scorer, infer_object
+    from pushtoknow.inference.session import InferenceConfig, infer_object
     from pushtoknow.models.checkpoint import load_checkpoint
     from pushtoknow.testbed.executor import SimulatedExecutor
     from pushtoknow.testbed.objects import load_object_spec
@@ -56,14 +56,9 @@ def _run_one(args) -> dict:
     cfg = InferenceConfig(
         pushes=pushes, policy=policy, num_sigma_points=sigma_points, profiles=profiles
     )
-    scorer = (
-        active_scorer(policy, sim, cfg.active_horizon_fraction)
-        if policy.startswith("active")
-        else None
-    )
     ex = SimulatedExecutor(spec, sim, seed=seed, recentre=True)
     try:
-        res = infer_object(model, ex, cfg, seed, initial_pose=ex.initial_pose, active_scorer=scorer)
+        res = infer_object(model, ex, cfg, seed, initial_pose=ex.initial_pose)
     finally:
         ex.close()
     rows = [res.prior, *res.estimates]

@@ -42,6 +42,7 @@ from pydantic import Field
 from pushtoknow.baselines.random_forest import ForestBaseline, ForestConfig, features_from_dataset
 from pushtoknow.common.config import Config
 from pushtoknow.common.params import PARAM_NAMES
+from pushtoknow.common.policies import POLICY_NAMES
 from pushtoknow.evaluation.heldout import HeldoutRun, evaluate_heldout
 from pushtoknow.evaluation.metrics import (
     PriorMeanPredictor,
@@ -56,7 +57,6 @@ from pushtoknow.testbed.objects import load_object_spec
 PRIOR = "prior-mean"
 FOREST = "forest"
 FOREST_VISNET = "forest-visnet"
-POLICIES = ("uniform", "random", "active-kl", "active-entropy")
 ORACLE_KEY = "oracle"  # evaluation.identification.ORACLE
 
 
@@ -66,7 +66,7 @@ class EvaluationConfig(Config):
     heldout_objects: int | None = Field(None, ge=1, description="None: all held-out objects")
     novel_objects: int = Field(20, ge=0)
     pushes: int = Field(5, ge=1)
-    policies: tuple[str, ...] = POLICIES
+    policies: tuple[str, ...] = POLICY_NAMES
     folds: int = Field(5, ge=2)
     seed: int = 0
     workers: int = Field(2, ge=1)
@@ -322,9 +322,9 @@ def run_evaluation(
 
     if not models:
         raise ValueError("evaluate needs at least one model (--models)")
-    unknown = [p for p in cfg.policies if p not in POLICIES]
+    unknown = [p for p in cfg.policies if p not in POLICY_NAMES]
     if unknown or not cfg.policies:
-        raise ValueError(f"unknown policies {unknown}; choose from {list(POLICIES)}")
+        raise ValueError(f"unknown policies {unknown}; choose from {list(POLICY_NAMES)}")
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     say = echo or (lambda _: None)

@@ -1,7 +1,8 @@
 """Inference on a novel object with a trained model (docs/DESIGN.md §9)."""
 
+from pushtoknow.common.policies import POLICY_NAMES
+from pushtoknow.inference.policies import PushPolicy, make_policy
 from pushtoknow.inference.session import (
-    POLICIES,
     InferenceConfig,
     InferenceResult,
     ObjectEstimator,
@@ -10,10 +11,12 @@ from pushtoknow.inference.session import (
 )
 
 __all__ = [
-    "POLICIES",
+    "POLICY_NAMES",
     "InferenceConfig",
     "InferenceResult",
     "ObjectEstimator",
     "PushEstimate",
+    "PushPolicy",
     "infer_object",
+    "make_policy",
 ]

@@ -18,18 +18,13 @@ Per push k:
 
 from __future__ import annotations
 
-import dataclasses
-import math
 from dataclasses import dataclass, field
-from typing import Literal
 
 import numpy as np
 import torch
 from pydantic import Field
 from scipy.stats import norm
 
-from pushtoknow.active.policies import ActivePolicy
-from pushtoknow.common.camera import CameraModel
 from pushtoknow.common.config import Config
 from pushtoknow.common.errors import UntrainedProfileError
 from pushtoknow.common.params import (
@@ -38,24 +33,28 @@ from pushtoknow.common.params import (
     normalise_params,
     si_moments,
 )
-from pushtoknow.geometry.affordances import mask_contour, sample_push_affordances
+from pushtoknow.common.policies import PolicyName
+from pushtoknow.geometry.affordances import mask_contour
+from pushtoknow.inference.policies import (
+    PushDecision,
+    PushPolicy,
+    candidate_pushes,
+    make_policy,
+)
 from pushtoknow.models.calibration import keep_evidence
 from pushtoknow.models.checkpoint import TrainedModel
 from pushtoknow.models.learned import PushContext, with_pad_track
+from pushtoknow.perception.footprint import footprint_from_mask
+from pushtoknow.perception.visnet import frames_as_tensors, visnet_measure
 from pushtoknow.testbed.config import SimConfig
 from pushtoknow.testbed.executor import PushExecutor, View
-from pushtoknow.testbed.push import ProfileName, Push, pad_positions
+from pushtoknow.testbed.push import ProfileName, Push
 from pushtoknow.testbed.sim import PushRecord
-from pushtoknow.training.data import footprint_from_mask
-from pushtoknow.training.visnet import frames_as_tensors, visnet_measure
-
-Policy = Literal["uniform", "random", "active-kl", "active-entropy"]
-POLICIES: tuple[str, ...] = ("uniform", "random", "active-kl", "active-entropy")
 
 
 class InferenceConfig(Config):
     pushes: int = Field(5, ge=1)
-    policy: Policy = "uniform"
+    policy: PolicyName = "uniform"
     candidates: int = Field(16, ge=1, description="affordances sampled per push decision")
     num_sigma_points: int | None = Field(None, ge=10, description="None: the model's")
     init_pose_std: tuple[float, float, float] = Field(
@@ -187,44 +186,6 @@ def belief_to_estimate(index: int, mean: torch.Tensor, cov: torch.Tensor, push=N
     return PushEstimate(index, si, std, m, c, push)
 
 
-def choose_push(
-    policy: Policy,
-    view: View,
-    camera: CameraModel,
-    k: int,
-    pushes: int,
-    pose0: np.ndarray,
-    rng: np.random.Generator,
-    speeds: dict[str, float],
-    candidates: int,
-    active=None,
-    profiles: tuple[str, ...] = ("constant",),
-) -> Push:
-    """The k-th push (0-based) of `pushes` by `policy` among `candidates` affordances of S_0;
-    candidate i has speed profile profiles[i mod P] at speeds[profile].
-
-    uniform: contact points spread evenly around the object — the candidate whose bearing
-    from the centroid, in the object frame, is nearest to 2πk/K (a seeded offset) — with
-    profile profiles[k mod P]; random: one random affordance and profile; active-*:
-    `active(list[Push]) → index`, so the policy chooses contact, direction and profile."""
-    cp, pd = sample_push_affordances(view.s0, camera, candidates, rng)
-    names = [profiles[i % len(profiles)] for i in range(len(pd))]
-    cands = [Push(tuple(cp[i]), float(pd[i]), names[i], speeds[names[i]]) for i in range(len(pd))]
-    if policy == "random":
-        return cands[0] if len(profiles) == 1 else cands[int(rng.integers(len(cands)))]
-    if policy == "uniform":
-        centre = mask_contour(view.s0, camera).centroid
-        bearing = np.arctan2(cp[:, 1] - centre[1], cp[:, 0] - centre[0]) - pose0[2]
-        target = 2 * math.pi * k / pushes + rng.uniform(0, 2 * math.pi / pushes)
-        diff = np.abs(np.angle(np.exp(1j * (bearing - target))))
-        profile = profiles[k % len(profiles)]
-        chosen = cands[int(np.argmin(diff))]
-        return dataclasses.replace(chosen, profile=profile, speed=speeds[profile])
-    if active is None:
-        raise ValueError(f"policy {policy!r} needs an active-selection scorer")
-    return cands[int(active(cands))]
-
-
 class ObjectEstimator:
     """Runs the trained filter on pushes of one object; see the module docstring."""
 
@@ -353,37 +314,6 @@ class ObjectEstimator:
         return np.stack(poses)
 
 
-def active_scorer(policy: Policy, sim_config: SimConfig, horizon_fraction: float = 0.5):
-    """The active scorer of `infer_object` for policy "active-kl" or "active-entropy":
-    docs/DESIGN.md §7 rollouts of the estimator's filter over the candidates' commanded pad paths
-    (`testbed.push.pad_positions`), all candidates in one batch."""
-    score = {"active-kl": "kl", "active-entropy": "entropy"}[policy]
-    push_config = sim_config.push
-    dt = 1.0 / sim_config.tactile.rate_hz
-    steps = int(round(push_config.horizon * sim_config.tactile.rate_hz))
-
-    def for_push(est: ObjectEstimator, view: View, pose0: np.ndarray):
-        policy_ = ActivePolicy(est.filter, steps, score, horizon_fraction, est.num_sigma_points)
-        mean, cov = est.start_belief(pose0)
-
-        def choose(cands: list[Push]) -> int:
-            times = np.arange(steps + 1) * dt
-            paths = torch.as_tensor(
-                np.stack([pad_positions(p, times, push_config) for p in cands]),
-                dtype=torch.float32,
-            )  # (M, T, 2)
-            base = est.context(view.s0, pose0, paths[:, 0], cands)
-
-            def builder(_: list[Push], step: int) -> PushContext:
-                return with_pad_track(base, paths, step + 1, dt)
-
-            return policy_.choose(cands, mean, cov, builder, est.gen)
-
-        return choose
-
-    return for_push
-
-
 def infer_object(
     model: TrainedModel,
     executor: PushExecutor,
@@ -393,12 +323,12 @@ def infer_object(
     truth: np.ndarray | None = None,
     object_name: str = "",
     on_push=None,
-    active_scorer=None,
+    policy: PushPolicy | None = None,
 ) -> InferenceResult:
     """K pushes on the executor's object with `model`; `on_push(estimate)` after each push.
 
-    active_scorer(estimator, view, pose0) → callable(list[Push]) → index, for active
-    policies. Speed profiles the model never saw in training are refused: its estimates on
+    `policy` chooses each push (default: `make_policy(config.policy)` with the model's testbed
+    settings). Speed profiles the model never saw in training are refused: its estimates on
     them are extrapolation (a constant-push model's CoM error more than doubles on release
     pushes, with 90% coverage near 0.7)."""
     trained = model.info.get("profiles")
@@ -408,30 +338,31 @@ def infer_object(
             f"profiles {', '.join(unseen)}: the model was trained on {', '.join(trained)} "
             "pushes only; train it on data with those profiles (pushtoknow simulate --profiles)"
         )
+    if policy is None:
+        policy = make_policy(config.policy, model.sim_config, config.active_horizon_fraction)
     est = ObjectEstimator(model, config, seed)
     speeds = profile_speeds(model.sim_config)
     result = InferenceResult(est.estimate(0), [], truth, object_name=object_name)
     for k in range(config.pushes):
         view = executor.observe()
         pose0 = est.start_pose(view, initial_pose)
-        active = None
-        if config.policy.startswith("active"):
-            if active_scorer is None:
-                raise ValueError(f"policy {config.policy!r} needs active selection")
-            active = active_scorer(est, view, pose0)
-        push = choose_push(
-            config.policy,
-            view,
-            est.camera,
+        cands, contacts = candidate_pushes(
+            view, est.camera, config.candidates, est.rng, speeds, config.profiles
+        )
+        decision = PushDecision(
             k,
             config.pushes,
+            cands,
+            contacts,
+            view,
+            est.camera,
             pose0,
             est.rng,
-            speeds,
-            config.candidates,
-            active,
             config.profiles,
+            speeds,
+            est,
         )
+        push = policy.choose(decision)
         rec = executor.execute(push)
         result.poses.append(est.filter_push(rec, view.s0, pose0))
         result.records.append(rec)

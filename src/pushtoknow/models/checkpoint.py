@@ -20,7 +20,7 @@ from pydantic import Field, field_validator
 import pushtoknow
 from pushtoknow.common.camera import CameraModel
 from pushtoknow.common.config import Config
-from pushtoknow.common.errors import CheckpointError
+from pushtoknow.common.errors import CheckpointError, first_line
 from pushtoknow.filters.base import BeliefFilter, FilterConfig
 from pushtoknow.filters.gaussian import symmetrize
 from pushtoknow.models.learned import (
@@ -262,7 +262,9 @@ def load_checkpoint(path: Path) -> TrainedModel:
     try:
         payload = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as e:
-        raise CheckpointError(f"{path} is not a readable pushtoknow checkpoint ({e})") from e
+        raise CheckpointError(
+            f"{path} is not a readable pushtoknow checkpoint ({first_line(e)})"
+        ) from e
     if not isinstance(payload, dict) or payload.get("format") != CHECKPOINT_FORMAT:
         raise CheckpointError(f"{path} is not a pushtoknow checkpoint")
     version = payload.get("format_version")

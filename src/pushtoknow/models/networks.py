@@ -250,7 +250,7 @@ class VisNetConfig(Config):
 
     position_scale: metres per unit of the Δx, Δy outputs. marker_channel: the input has one
     more channel, the expected orientation marker at the reference pose (for testbeds that
-    paint it; `training.visnet.visnet_inputs`).
+    paint it; `perception.visnet.visnet_inputs`).
     """
 
     in_channels: int = 5

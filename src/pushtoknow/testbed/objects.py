@@ -33,7 +33,7 @@ import numpy as np
 import yaml
 from shapely.geometry import Point
 
-from pushtoknow.common.errors import ObjectSpecError
+from pushtoknow.common.errors import ObjectSpecError, yaml_error_summary
 from pushtoknow.common.params import CATALOGUE_GRID, PARAM_RANGES, ObjectParams
 from pushtoknow.testbed.config import CameraConfig, PadConfig
 from pushtoknow.testbed.shapes import (
@@ -282,7 +282,7 @@ def load_object_spec(source: str | Path) -> ObjectSpec:
     try:
         data = yaml.safe_load(path.read_text())  # YAML is a superset of JSON
     except yaml.YAMLError as e:
-        raise ObjectSpecError("<file>", s, f"not valid JSON/YAML: {e}") from None
+        raise ObjectSpecError("<file>", s, yaml_error_summary(e)) from None
     return ObjectSpec.from_dict(data)
 
 

@@ -7,7 +7,6 @@ the action and the true parameters.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, fields
 from pathlib import Path
 
@@ -19,27 +18,8 @@ from pushtoknow.common.camera import CameraModel
 from pushtoknow.common.errors import DatasetError
 from pushtoknow.common.params import normalise_params
 from pushtoknow.datasets.shards import list_shards, open_shard
-from pushtoknow.geometry.affordances import mask_contour
+from pushtoknow.perception.footprint import footprint_from_mask
 from pushtoknow.testbed.config import SimConfig, stored_sim_config
-
-FOOTPRINT_VERTICES = 32  # footprint polygons resampled to this many vertices (batchable)
-
-
-def footprint_from_mask(s0: np.ndarray, camera: CameraModel, pose0, n: int = FOOTPRINT_VERTICES):
-    """Footprint polygon (n, 2) in the object frame (m) estimated from S_0 at pose0 (x, y, θ):
-    the mask contour resampled evenly by arc length, translated to its centroid and rotated by
-    −θ0."""
-    c = mask_contour(s0, camera)
-    pts = c.points
-    seg = np.linalg.norm(np.diff(np.vstack([pts, pts[:1]]), axis=0), axis=1)
-    s = np.concatenate([[0], np.cumsum(seg)])
-    q = np.linspace(0, s[-1], n, endpoint=False)
-    closed = np.vstack([pts, pts[:1]])
-    res = np.stack([np.interp(q, s, closed[:, 0]), np.interp(q, s, closed[:, 1])], 1)
-    res = res - c.centroid
-    th = -float(pose0[2])
-    R = np.array([[math.cos(th), -math.sin(th)], [math.sin(th), math.cos(th)]])
-    return res @ R.T
 
 
 @dataclass
@@ -173,10 +153,10 @@ def iter_push_groups(root: Path, max_objects: int | None = None):
 def load_frames(root: Path, every: int = 5, max_objects: int | None = None):
     """Image frames for VisNet: every `every`-th frame of each push.
 
-    Returns VisNet inputs rgbd (F, 4, H, W) (`training.visnet.rgbd_input`), mask0 (F, 1, H, W),
+    Returns VisNet inputs rgbd (F, 4, H, W) (`perception.visnet.rgbd_input`), mask0 (F, 1, H, W),
     pose (F, 3), pose0 (F, 3), push id (F,).
     """
-    from pushtoknow.training.visnet import frames_as_tensors
+    from pushtoknow.perception.visnet import frames_as_tensors
 
     rgbd, mask0, pose, pose0, pid = [], [], [], [], []
     camera, _ = dataset_camera(root)
@@ -201,7 +181,7 @@ def compute_vision_poses(
     measure(rgbd (T, 4, H, W), mask0 (T, 1, H, W), pose (T, 3) true, pose0 (T, 3)) → (T, 3):
     the caller's VisNet measurement (its reference pose derived from the truth, e.g. perturbed).
     """
-    from pushtoknow.training.visnet import frames_as_tensors
+    from pushtoknow.perception.visnet import frames_as_tensors
 
     camera, _ = dataset_camera(root)
     out = []

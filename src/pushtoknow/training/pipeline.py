@@ -40,6 +40,7 @@ from pushtoknow.models.checkpoint import (
     save_checkpoint,
 )
 from pushtoknow.models.learned import LearnedModelsConfig
+from pushtoknow.perception.visnet import visnet_measure
 from pushtoknow.testbed.config import SimConfig, check_testbed_version
 from pushtoknow.testbed.push import PROFILES
 from pushtoknow.training.calibration import SequenceCalibrationConfig, calibrate_evidence
@@ -52,7 +53,7 @@ from pushtoknow.training.data import (
 )
 from pushtoknow.training.end_to_end import EndToEndConfig, evaluate_filter, train_end_to_end
 from pushtoknow.training.supervised import SupervisedConfig, tactile_losses, train_supervised
-from pushtoknow.training.visnet import VisNetTrainConfig, perturb, train_visnet, visnet_measure
+from pushtoknow.training.visnet import VisNetTrainConfig, perturb, train_visnet
 
 
 class CalibrationConfig(Config):

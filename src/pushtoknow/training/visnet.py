@@ -17,16 +17,13 @@ import math
 import time
 from dataclasses import dataclass
 
-import numpy as np
 import torch
-import torch.nn.functional as F
 from pydantic import Field
 
 from pushtoknow.common.camera import CameraModel
 from pushtoknow.common.config import Config
-from pushtoknow.geometry.warp import marker_mask, warp_mask
 from pushtoknow.models.networks import VisNet, VisNetConfig
-from pushtoknow.testbed.objects import DEFAULT_HEIGHT
+from pushtoknow.perception.visnet import net_inputs, visnet_measure
 
 
 class VisNetTrainConfig(Config):
@@ -45,12 +42,6 @@ class VisNetTrainConfig(Config):
     )
 
 
-def rgbd_input(rgb: torch.Tensor, depth: torch.Tensor, camera: CameraModel) -> torch.Tensor:
-    """rgb (N, 3, H, W) in [0, 1] and depth (N, 1, H, W) metres → VisNet's (N, 4, H, W)."""
-    height = (camera.position[2] - depth) / DEFAULT_HEIGHT
-    return torch.cat([rgb, height], dim=1)
-
-
 def perturb(pose: torch.Tensor, cfg: VisNetTrainConfig, gen: torch.Generator) -> torch.Tensor:
     """Reference poses: pose (N, 3) plus Gaussian noise (θ clipped)."""
     n = pose.shape[0]
@@ -61,50 +52,14 @@ def perturb(pose: torch.Tensor, cfg: VisNetTrainConfig, gen: torch.Generator) ->
     return pose + torch.cat([dxy, dth[:, None]], 1)
 
 
-def visnet_inputs(rgbd, mask0, pose0, ref, camera: CameraModel, crop: int, marker=False):
-    """VisNet's inputs: a crop×crop window (native resolution) centred on the reference
-    position of [RGB, height, height − Ŝ_ref] (the last channel shows the misalignment, which
-    makes small rotations visible), plus, with `marker`, where the orientation marker should
-    be at the reference pose (`marker_mask` warped like S_0), and Ŝ_ref: S_0 warped to the
-    reference pose."""
-    s_ref = warp_mask(mask0, ref, pose0, camera)
-    parts = [rgbd, rgbd[:, 3:4].clamp(0, 1) - s_ref]
-    if marker:
-        parts.append(warp_mask(marker_mask(mask0, pose0, camera), ref, pose0, camera))
-    x = torch.cat([*parts, s_ref], dim=1)
-    n = x.shape[0]
-    f = camera.focal_px / camera.position[2]
-    cu, cv = camera.principal_point
-    u = cu + f * (ref[:, 0] - camera.position[0])
-    v = cv - f * (ref[:, 1] - camera.position[1])
-    centre = torch.stack([(2 * u + 1) / camera.width - 1, (2 * v + 1) / camera.height - 1], -1)
-    scale = torch.tensor([crop / camera.width, crop / camera.height], dtype=x.dtype)
-    theta = torch.cat([torch.diag_embed(scale.expand(n, 2)), centre[:, :, None]], -1)
-    grid = F.affine_grid(theta, [n, x.shape[1], crop, crop], align_corners=False)
-    w = F.grid_sample(x, grid, mode="bilinear", padding_mode="zeros", align_corners=False)
-    return w[:, :-1], w[:, -1:]
-
-
-def _net_inputs(net: VisNet, rgbd, mask0, pose0, ref, camera):
-    c = net.config
-    return visnet_inputs(rgbd, mask0, pose0, ref, camera, c.image_size, c.marker_channel)
-
-
 def visnet_loss(net: VisNet, rgbd, mask0, pose, pose0, ref, camera, position_weight=1.0):
     """MSE between VisNet's relative pose and the truth relative to the reference."""
-    out = net(*_net_inputs(net, rgbd, mask0, pose0, ref, camera))
+    out = net(*net_inputs(net, rgbd, mask0, pose0, ref, camera))
     target = VisNet.pose_to_target(pose, ref)
     scale = net.config.position_scale
     pos = ((out[:, :2] - target[:, :2]) / scale).square().sum(-1)
     ang = (out[:, 2:] - target[:, 2:]).square().sum(-1)
     return (position_weight * pos + ang).mean()
-
-
-@torch.no_grad()
-def visnet_measure(net: VisNet, rgbd, mask0, pose0, ref, camera) -> torch.Tensor:
-    """Pose measurement (N, 3) = reference ⊕ VisNet residual."""
-    rel = net(*_net_inputs(net, rgbd, mask0, pose0, ref, camera))
-    return VisNet.to_pose(rel, ref)
 
 
 @dataclass
@@ -205,10 +160,3 @@ def evaluate_visnet(net, rgbd, mask0, pose, pose0, ref, camera, batch=512) -> di
         "ref_xy_rmse_mm": r_xy,
         "ref_theta_med_deg": r_th,
     }
-
-
-def frames_as_tensors(rgb: np.ndarray, depth: np.ndarray, camera: CameraModel) -> torch.Tensor:
-    """(T, H, W, 3) uint8 and (T, H, W) float → (T, 4, H, W) VisNet input."""
-    r = torch.as_tensor(rgb).permute(0, 3, 1, 2).float() / 255.0
-    d = torch.as_tensor(depth, dtype=torch.float32)[:, None]
-    return rgbd_input(r, d, camera)
