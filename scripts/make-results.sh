@@ -4,8 +4,11 @@
 #      (scripts/train-variants.sh; skipped where already done),
 #   2. the real MIT Push sample pushes (import-mit, estimate-real), the learning-efficiency and
 #      speed-profile ablations, all 88 held-out objects,
-#   3. `pushtoknow evaluate` (configs/evaluate.yaml) on the shipped model and the variants.
-# Seeds: data 1, training 0, evaluation 0. ~2.5 h on 2 cores when nothing is cached.
+#   3. physics-based identification on novel objects (identify-bench, mixed and constant pushes),
+#   4. `pushtoknow evaluate` (configs/evaluate.yaml, with the oracle row) on the shipped model and
+#      the variants.
+# Seeds: data 1, training 0, evaluation 0, identification benchmark 8. ~4 h on 2 cores when
+# nothing is cached.
 # Usage: bash scripts/make-results.sh [WORKDIR]   (default: runs/pretrained)
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -44,13 +47,8 @@ else
     echo "no $SAMPLE: RESULTS.md will have no real-data section" >&2
 fi
 # learning efficiency: ~40 min; skipped where done (the run resumes)
-.venv/bin/pushtoknow ablate-efficiency --config configs/efficiency.yaml --out "$WORK/efficiency" \
-    --seed 0
-.venv/bin/python -c "import json, sys; from pushtoknow.evaluation.report import efficiency_markdown
-print(efficiency_markdown(json.load(open(sys.argv[1])), sys.argv[2]))" \
-    "$WORK/efficiency/efficiency.json" \
-    "pushtoknow ablate-efficiency --config configs/efficiency.yaml --out $WORK/efficiency --seed 0" \
-    > "$WORK/efficiency/section.md"
+$PTK ablate-efficiency --config configs/efficiency.yaml --out "$WORK/efficiency" --seed 0 \
+    --markdown "$WORK/efficiency/section.md"
 APPEND+=(--append "$WORK/efficiency/section.md")
 
 # speed profiles: ~40 min; its data, model and conditions are skipped where done
@@ -58,13 +56,17 @@ bash scripts/ablate-profiles.sh "$WORK/profiles"
 APPEND+=(--append "$WORK/profiles/ablation/section.md")
 
 # all 88 held-out objects under the shipped model and uniform pushes (the suite uses 44)
-HCMD="pushtoknow evaluate-heldout --objects 88 --pushes 5 --policy uniform --seed 0 --workers 2"
 $PTK evaluate-heldout --objects 88 --pushes 5 --policy uniform --seed 0 --workers 2 \
-    --out "$WORK/heldout88.json"
-.venv/bin/python -c "import json, sys; from pushtoknow.evaluation.report import heldout_markdown
-print(heldout_markdown(json.load(open(sys.argv[1])), sys.argv[2]))" "$WORK/heldout88.json" \
-    "$HCMD" > "$WORK/heldout88.md"
+    --out "$WORK/heldout88.json" --markdown "$WORK/heldout88.md"
 APPEND=(--append "$WORK/heldout88.md" "${APPEND[@]}")
+
+# physics-based identification on 16 novel objects, mixed and constant-only pushes: ~15 min
+mkdir -p "$WORK/identify"
+$PTK identify-bench --objects 16 --pushes 5 --profiles constant,release --seed 8 \
+    --out "$WORK/identify/mixed.json" --markdown "$WORK/identify/mixed.md"
+$PTK identify-bench --objects 16 --pushes 5 --profiles constant --seed 8 \
+    --out "$WORK/identify/constant.json" --markdown "$WORK/identify/constant.md"
+APPEND+=(--append "$WORK/identify/mixed.md" --append "$WORK/identify/constant.md")
 
 $PTK evaluate --data "$WORK/data" --models pretrained --models "$WORK/vt-addf-physics-network" \
     --models "$WORK/vt-addf-black-box" \

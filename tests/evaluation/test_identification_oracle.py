@@ -52,3 +52,32 @@ def test_oracle_row_from_the_pushes_a_model_made():
     assert abs(run.product[0, 0] / (0.4 * 0.6) - 1) > 0.02  # the prior row does not know it
     summary = summarise_method(run, [np.array([0])])
     assert set(summary["coverage90_per_param"]) >= {"mass", "inertia", "overall"}
+
+
+def test_the_oracle_reruns_a_cached_run_without_push_tracks(tmp_path, monkeypatch):
+    """A cached inference run is reused, unless the oracle needs the push tracks it lacks."""
+    import numpy as np
+
+    from pushtoknow.evaluation import suite
+    from pushtoknow.evaluation.heldout import HeldoutRun
+
+    def run(tracks: bool) -> HeldoutRun:
+        z = np.zeros((1, 2, 5))
+        return HeldoutRun(z, z, z, np.zeros((1, 2)), np.zeros((1, 5)), ["o"], [1.0],
+                          np.zeros((1, 1, 3)), np.zeros((1, 1, 3)), [["constant"]],
+                          np.zeros((1, 1, 5)) if tracks else None,
+                          np.zeros((1, 1, 4, 9)) if tracks else None)  # fmt: skip
+
+    calls = []
+    monkeypatch.setattr(suite, "evaluate_heldout", lambda *a, **k: calls.append(1) or run(True))
+    cfg = suite.EvaluationConfig(heldout_objects=1, novel_objects=0)
+    cache = tmp_path / "run.npz"
+    model = tmp_path / "model.pt"
+    model.write_bytes(b"weights")
+    key = suite._cache_key(model, "uniform", ["o"], cfg, ("constant",))
+    suite._save_run(cache, key, run(False))
+    args = (model, "uniform", ["o"], cfg, ("constant",), cache, None)
+    assert suite._inference_run(*args).push_tracks is None and not calls  # from the cache
+    assert suite._inference_run(*args, need_tracks=True).push_tracks is not None and calls
+    assert suite._inference_run(*args, need_tracks=True).push_tracks is not None  # re-cached
+    assert len(calls) == 1

@@ -33,8 +33,18 @@ def invoke(*args):
 @pytest.fixture(scope="module")
 def ablation(tmp_path_factory):
     out = tmp_path_factory.mktemp("efficiency") / "ci"
-    result = invoke("ablate-efficiency", "--config", CI_CONFIG, "--out", out, "--seed", 0, "--json")
+    result = invoke(
+        "ablate-efficiency", "--config", CI_CONFIG, "--out", out, "--seed", 0, "--json",
+        "--markdown", out.parent / "section.md",
+    )  # fmt: skip
     return result, out
+
+
+def test_the_report_section_is_written_by_the_command(ablation):
+    _, out = ablation
+    text = (out.parent / "section.md").read_text()
+    assert text.startswith("## Learning efficiency")
+    assert "pushtoknow ablate-efficiency --config" in text  # how to reproduce it
 
 
 def test_ci_ablation_writes_json_csv_png(ablation):

@@ -74,6 +74,31 @@ def _save_and_print_json(data: dict, out: Path | None, as_json: bool) -> bool:
     return as_json
 
 
+REPORT_OPTIONS = {"markdown", "as_json", "append"}  # how a result is shown, not what it is
+
+
+def _command_line(ctx: typer.Context) -> str:
+    """The command that reproduces this one's results: its path and every option given a value
+    other than its default (output-display options left out), for reports."""
+    import enum as _enum
+    import shlex
+
+    parts = ["pushtoknow", *ctx.command_path.split()[1:]]
+    for p in ctx.command.params:
+        value = ctx.params.get(p.name)
+        if p.name in REPORT_OPTIONS or value is None or value == p.default or value == []:
+            continue
+        values = value if isinstance(value, (list, tuple)) else [value]
+        for v in values:
+            v = v.value if isinstance(v, _enum.Enum) else v
+            flag = p.opts[0] if p.opts[0].startswith("-") else None
+            if isinstance(v, bool):
+                parts.append(flag if v else p.secondary_opts[0] if p.secondary_opts else "")
+            else:
+                parts += [flag, str(v)] if flag else [str(v)]
+    return shlex.join([x for x in parts if x])
+
+
 def _flatten(data: dict, prefix: str = "") -> list[tuple[str, str]]:
     rows = []
     for k, v in data.items():
@@ -261,6 +286,7 @@ def bench_active(
 
 @app.command("evaluate-heldout")
 def evaluate_heldout_cmd(
+    ctx: typer.Context,
     model: str = typer.Option("pretrained", "--model"),
     objects: int = typer.Option(
         88, "--objects", min=1, max=88, help="held-out catalogue objects (≤ 88)"
@@ -272,6 +298,9 @@ def evaluate_heldout_cmd(
     out: Path = typer.Option(None, "--out", help="write the metrics JSON here"),
     as_json: bool = typer.Option(False, "--json"),
     profiles: str = typer.Option(None, "--profiles", help=PROFILES_HELP),
+    markdown: Path | None = typer.Option(
+        None, "--markdown", help="write the report section (markdown) here"
+    ),
 ):
     """NRMSE after each of K pushes on held-out catalogue objects (the catalogue's test split),
     with the prior-mean predictor and the coverage of the 68% / 90% intervals."""
@@ -328,6 +357,10 @@ def evaluate_heldout_cmd(
             ],
         }
     )
+    if markdown is not None:
+        from pushtoknow.evaluation.report import heldout_markdown
+
+        markdown.write_text(heldout_markdown(metrics, _command_line(ctx)) + "\n")
     if _save_and_print_json(metrics, out, as_json):
         return
     t = Table(title=f"NRMSE on {n} held-out objects ({policy_name}, seed {seed})")
@@ -408,6 +441,7 @@ def ablate_profiles_cmd(
 
 @app.command("evaluate")
 def evaluate_cmd(
+    ctx: typer.Context,
     data: Path = typer.Option(..., "--data", help="training dataset (forest + prior-mean fit)"),
     models: list[str] = typer.Option(
         ..., "--models", help="trained runs (RUN dir, model.pt or 'pretrained'); repeat the flag"
@@ -430,7 +464,6 @@ def evaluate_cmd(
 ):
     """Prior mean, random forest (ground-truth and VisNet poses), each model and push policy on
     held-out and novel objects: NRMSE (mean ± std over folds), coverage, figures, RESULTS.md."""
-    import shlex
 
     from rich.progress import Progress
 
@@ -454,7 +487,7 @@ def evaluate_cmd(
         results = run_evaluation(
             data, paths, cfg, out, progress=progress, echo=lambda m: err_console.print(m)
         )
-    command = "pushtoknow " + shlex.join(sys.argv[1:]) if sys.argv[1:] else "pushtoknow evaluate"
+    command = _command_line(ctx)
     (out / "RESULTS.md").write_text(render_report(results, command, extra))
     if as_json:
         print(json.dumps({k: results[k] for k in ("methods", "primary", "config")}))
@@ -815,11 +848,15 @@ def collect(
 
 @app.command("ablate-efficiency")
 def ablate_efficiency(
+    ctx: typer.Context,
     config: Path = typer.Option(..., "--config", help="YAML EfficiencyConfig"),
     out: Path = typer.Option(..., "--out", help="ablation folder (resumed if it exists)"),
     seed: int = seed_option(help="base seed (≥ 0): replicates use seed + config seeds"),
     workers: int = typer.Option(None, "--workers", min=1, help="default: the config's"),
     as_json: bool = typer.Option(False, "--json", help="print efficiency.json to stdout"),
+    markdown: Path | None = typer.Option(
+        None, "--markdown", help="write the report section (markdown) here"
+    ),
 ):
     """Learning efficiency (paper Fig. 4b): validation loss versus training pushes for data
     collected with each policy, over seeds; writes efficiency.json/.csv/.png."""
@@ -846,6 +883,10 @@ def ablate_efficiency(
             ylabel="validation parameter NLL",
             title=f"learning efficiency ({len(cfg.seeds)} seeds, mean ± std)",
         )
+    if markdown is not None:
+        from pushtoknow.evaluation.report import efficiency_markdown
+
+        markdown.write_text(efficiency_markdown(results, _command_line(ctx)) + "\n")
     if as_json:
         print(json.dumps(results))
         return
@@ -979,6 +1020,7 @@ def identify_cmd(
 
 @app.command("identify-bench")
 def identify_bench_cmd(
+    ctx: typer.Context,
     objects: int = typer.Option(16, "--objects", min=1, help="novel objects (unseen shapes)"),
     pushes: int = typer.Option(5, "--pushes", min=1, help="pushes per object"),
     profiles: str = typer.Option(
@@ -988,6 +1030,9 @@ def identify_bench_cmd(
     workers: int = typer.Option(2, "--workers", min=1),
     out: Path = typer.Option(None, "--out", help="write the results JSON here"),
     as_json: bool = typer.Option(False, "--json", help="print the results JSON"),
+    markdown: Path | None = typer.Option(
+        None, "--markdown", help="write the report section (markdown) here"
+    ),
 ):
     """Accuracy, coverage and compute of `identify` on simulated novel objects (true
     footprint, the testbed's own physics: an upper bound for any estimator on this testbed)."""
@@ -1004,6 +1049,10 @@ def identify_bench_cmd(
         res = run_identification_benchmark(
             objects, pushes, names, seed, cfg, progress=lambda _: bar.advance(task)
         )
+    if markdown is not None:
+        from pushtoknow.evaluation.report import identification_markdown
+
+        markdown.write_text(identification_markdown([res], [_command_line(ctx)]) + "\n")
     if _save_and_print_json(res, out, as_json):
         return
     t = Table(

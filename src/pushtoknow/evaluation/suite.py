@@ -251,10 +251,13 @@ def _inference_run(
     profiles: tuple[str, ...],
     cache: Path,
     progress,
+    need_tracks: bool = False,
 ) -> HeldoutRun:
+    """The model's run under `policy` on `objects`, from `cache` when it holds the same run (and
+    its push tracks, when `need_tracks`: the oracle replays them)."""
     key = _cache_key(model, policy, objects, cfg, profiles)
     cached = _load_run(cache, key)
-    if cached is not None:
+    if cached is not None and not (need_tracks and cached.push_tracks is None):
         return cached
     run = evaluate_heldout(
         model,
@@ -353,7 +356,12 @@ def run_evaluation(
                 say(f"{set_name}: {method} on {len(objects)} objects ({', '.join(profiles)})")
                 adv = progress(f"{set_name} {method}", len(objects)) if progress else None
                 cache = out / "cache" / set_name / f"{method.replace(':', '_')}.npz"
-                run = _inference_run(model, policy, objects, cfg, profiles, cache, adv)
+                is_base = (
+                    i == 0 and policy == cfg.policies[0]
+                )  # the forest and oracle use its pushes
+                run = _inference_run(
+                    model, policy, objects, cfg, profiles, cache, adv, cfg.oracle and is_base
+                )
                 methods[method] = MethodRun(
                     run.mean,
                     run.std,
@@ -364,7 +372,7 @@ def run_evaluation(
                     run.zscore,
                     run.profiles,
                 )
-                if i == 0 and policy == cfg.policies[0]:
+                if is_base:
                     base = run
         n = len(objects)
         p_mean, p_std = prior.predict(n)
@@ -381,14 +389,11 @@ def run_evaluation(
         if cfg.oracle:
             from pushtoknow.evaluation.identification import ORACLE, oracle_run
 
-            if base.push_tracks is None:
-                say(f"{set_name}: no oracle row (cached inference runs hold no push tracks)")
-            else:
-                say(f"{set_name}: {ORACLE} (physics-based identification) on {n} objects")
-                adv = progress(f"{set_name} {ORACLE}", n) if progress else None
-                methods[ORACLE] = oracle_run(
-                    base, objects, loaded[0].sim_config, cfg.seed, cfg.workers, adv
-                )
+            say(f"{set_name}: {ORACLE} (physics-based identification) on {n} objects")
+            adv = progress(f"{set_name} {ORACLE}", n) if progress else None
+            methods[ORACLE] = oracle_run(
+                base, objects, loaded[0].sim_config, cfg.seed, cfg.workers, adv
+            )
         results["sets"][set_name] = {
             "objects": base.ids,
             "folds": cfg.folds,
