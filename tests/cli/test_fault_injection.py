@@ -52,6 +52,32 @@ CASES = [
     (["evaluate-heldout", "--objects", "2", "--policy", "greedy"], "'--policy'"),
     (["infer", "--object", "catalogue:3", "--model", "{tmp}/taken"], "not a readable pushtoknow"),
     (["infer", "--object", "{tmp}/broken.yaml"], "line 2"),
+    (["import-mit", "{tmp}", "--out", "{tmp}/m", "--rate", "-5"], "'--rate'"),
+    (["import-mit", "{tmp}", "--out", "{tmp}/m", "--as-speed", "-20"], "'--as-speed'"),
+    (["push", "--out", "{tmp}/taken.txt"], "unsupported image format 'txt'"),
+    (["push", "--out", "{tmp}"], "is a folder"),
+    (
+        [
+            "push",
+            "--object",
+            '{"shape": "rect1", "mass": 0.5, "friction": 0.5, "com": [0, 0.01], '
+            '"inertia": 0.5e-3, "height": 1000}',
+        ],
+        "height=1000",
+    ),
+    (
+        [
+            "push",
+            "--object",
+            '{"shape": "rect1", "mass": 0.5, "friction": 0.5, "com": [0, 0.01], "inertia": 1e-12}',
+        ],
+        "inertia=1e-12",
+    ),
+    (["infer", "--object", "catalogue:3", "--out", "{tmp}/taken"], "is a file"),
+    (["evaluate-heldout", "--objects", "1", "--out", "{tmp}"], "is a folder"),
+    (["train", "--data", "{tmp}", "--out", "{tmp}/run"], "holds a trained model"),
+    (["simulate", "--objects", "1", "--out", "{tmp}/gen"], "generation.json"),
+    (["simulate", "--objects", "1", "--out", "{tmp}/s", "--profiles", "foo"], "'foo'"),
     (["identify", "--pushes", "{tmp}/nowhere"], "no such dataset directory"),
     (["identify", "--pushes", "{tmp}", "--config", "{tmp}/missing.yaml"], "missing.yaml"),
     (["identify", "--pushes", "{tmp}", "--config", "{tmp}/broken.yaml"], "not valid YAML"),
@@ -76,6 +102,11 @@ def test_bad_input_exits_2_with_a_message_not_a_traceback(
     (tmp_path / "broken.yaml").write_text("a: [\n")
     (tmp_path / "garbage").mkdir()
     (tmp_path / "empty").mkdir()
+    (tmp_path / "taken.txt").write_text("keep me too")
+    (tmp_path / "run").mkdir()
+    (tmp_path / "run" / "model.pt").write_text("a finished run")
+    (tmp_path / "gen").mkdir()
+    (tmp_path / "gen" / "generation.json").write_text("{broken")
     (tmp_path / "garbage" / "shard-00000.h5").write_bytes(b"\x89HDF garbage" * 10)
     (tmp_path / "unknown.yaml").write_text("huber_k: 3\n")
     taken = tmp_path / "taken"
@@ -86,6 +117,8 @@ def test_bad_input_exits_2_with_a_message_not_a_traceback(
     errors = [ln for ln in text.splitlines() if ln.startswith("error:")]
     assert len(errors) == 1 and needle in errors[0], text  # one line, usage errors too
     assert taken.read_text() == "keep me"
+    assert (tmp_path / "taken.txt").read_text() == "keep me too"
+    assert (tmp_path / "run" / "model.pt").read_text() == "a finished run"
 
 
 def test_version(monkeypatch, capsys):
@@ -127,3 +160,15 @@ def test_a_full_disk_ends_in_a_message_and_loses_nothing(tmp_path, monkeypatch, 
     assert code == 2 and "no space left on device" in text and "Traceback" not in text
     assert "shard-00000.h5" in text
     assert keep.read_text() == "mine" and not list(out.glob("shard-*.h5"))
+
+
+def test_training_on_a_single_object_is_refused_before_any_work(tmp_path, monkeypatch, capsys):
+    from pushtoknow.datasets.generate import GenerationConfig, generate_dataset
+    from pushtoknow.testbed.config import PushConfig, SimConfig
+
+    cfg = GenerationConfig(objects=1, pushes=1, seed=0, sim=SimConfig(push=PushConfig(horizon=1.0)))
+    generate_dataset(tmp_path / "one", cfg, progress=False)
+    code, text = _run(monkeypatch, capsys, ["train", "--data", str(tmp_path / "one"), "--out",
+                                            str(tmp_path / "run")])  # fmt: skip
+    assert code == 2 and "1 object(s); training needs at least 2" in text
+    assert not (tmp_path / "run").exists()  # nothing written

@@ -186,3 +186,19 @@ def test_corruption_inside_a_shard_is_found_by_verify_and_resume(tmp_path, datas
     with pytest.raises(DatasetError, match="shard-00001.h5"):
         generate_dataset(copy, cfg(), progress=False)  # resume refuses to build on it
     assert bad.read_bytes() == before  # and leaves it as it was
+
+
+def test_a_refused_resume_writes_no_provenance_record(tmp_path, dataset):
+    """Without its generation.json, a folder's shards decide: a run with other settings is
+    refused before it writes a record of its own (which would then refuse the original run)."""
+    import shutil
+
+    copy = tmp_path / "ds"
+    shutil.copytree(dataset, copy)
+    (copy / "generation.json").unlink()
+    with pytest.raises(DatasetError, match="other settings"):
+        generate_dataset(copy, cfg(seed=2), progress=False)
+    assert not (copy / "generation.json").exists()
+    assert generate_dataset(copy, cfg(), progress=False)["shards_skipped"] == 2
+    info = dataset_info(copy, verify=True)
+    assert info["verified_shards"] == 2

@@ -168,11 +168,13 @@ def test_com_rule_follows_physics_for_non_convex_footprints():
         ({"shape": {"type": "rectangle", "width": 4.0, "height": 4.0}}, "radius 2.828 m"),
         ({"shape": {"type": "rectangle", "width": 0.02, "height": 0.09}}, "width 0.0200 m"),
         ({"height": 0.005}, "height=0.005"),
+        ({"height": 1000.0}, "height=1000.0"),
+        ({"inertia": 1e-12, "shape": "rect1"}, "inertia=1e-12"),
     ],
 )
 def test_objects_the_testbed_cannot_simulate_are_refused(override, needle):
     with pytest.raises(ObjectSpecError, match=needle.replace(".", r"\.")):
-        spec(**{**override, "com": [0.0, 0.0], "inertia": 1e-4})
+        spec(**{"com": [0.0, 0.0], "inertia": 1e-4, **override})
 
 
 def test_catalogue_rejections_are_physical():

@@ -193,7 +193,7 @@ def features_from_dataset(root, pose_fn=None):
     import json
 
     from pushtoknow.common.errors import DatasetError
-    from pushtoknow.datasets.shards import list_shards, read_shard
+    from pushtoknow.datasets.shards import list_shards, open_shard, read_shard
     from pushtoknow.testbed.config import SimConfig
 
     shards = list_shards(root)
@@ -201,9 +201,7 @@ def features_from_dataset(root, pose_fn=None):
         raise DatasetError(root, "no shard-*.h5 files: the forest has no training pushes")
     X, Y, obj, k = [], [], [], []
     for s in shards:
-        import h5py
-
-        with h5py.File(s, "r") as f:
+        with open_shard(s) as f:
             cam = SimConfig.model_validate(json.loads(f.attrs["sim_config"])).camera.model()
         for ep in read_shard(s):
             X.append(features_from_records(ep.records, cam, pose_fn))

@@ -99,6 +99,29 @@ def _command_line(ctx: typer.Context) -> str:
     return shlex.join([x for x in parts if x])
 
 
+IMAGE_FORMATS = ("png", "jpg", "jpeg", "pdf", "svg")
+
+
+def _image_out(path: Path, option: str = "--out") -> Path:
+    """An image path checked before any work: a known format (no suffix: .png), not a folder."""
+    if path.is_dir():
+        raise typer.BadParameter(f"{option} {path}: is a folder, not an image file")
+    suffix = path.suffix.lower().lstrip(".")
+    if not suffix:
+        return path.with_suffix(".png")
+    if suffix not in IMAGE_FORMATS:
+        raise typer.BadParameter(
+            f"{option} {path}: unsupported image format '{suffix}' ({', '.join(IMAGE_FORMATS)})"
+        )
+    return path
+
+
+def _out_folder(path: Path | None, option: str = "--out") -> None:
+    """Refuse, before any work, an output folder that is an existing file."""
+    if path is not None and path.exists() and not path.is_dir():
+        raise typer.BadParameter(f"{option} {path}: is a file, not a folder")
+
+
 def _flatten(data: dict, prefix: str = "") -> list[tuple[str, str]]:
     rows = []
     for k, v in data.items():
@@ -133,8 +156,17 @@ def _profiles(text: str) -> tuple[str, ...]:
     return names
 
 
+def _validation_summary(e: Exception) -> str | None:
+    """'field: problem; …' for a settings validation error (pydantic), else None."""
+    errors = getattr(e, "errors", None)
+    if not callable(errors) or type(e).__name__ != "ValidationError":
+        return None
+    return "; ".join(f"{'.'.join(map(str, d['loc'])) or '<root>'}: {d['msg']}" for d in errors())
+
+
 def _fail(e: Exception) -> None:
-    err_console.print(f"[bold red]error:[/] {e}")
+    message = _validation_summary(e) or first_line(e)
+    err_console.print(f"[bold red]error:[/] {message}", highlight=False)
     raise typer.Exit(2)
 
 
@@ -168,7 +200,7 @@ def simulate(
             pushes=pushes,
             seed=seed,
             objects_from=objects_from,
-            profiles=tuple(p.strip() for p in profiles.split(",")),
+            profiles=_profiles(profiles),
             objects_per_shard=objects_per_shard,
             sim=sim,
         )
@@ -306,6 +338,8 @@ def evaluate_heldout_cmd(
     with the prior-mean predictor and the coverage of the 68% / 90% intervals."""
     profile_names = None if profiles is None else _profiles(profiles)
     policy_name = policy.value
+    if out is not None and out.is_dir():
+        raise typer.BadParameter(f"--out {out}: is a folder; give the metrics JSON file")
     import numpy as np
     from rich.progress import Progress
 
@@ -517,9 +551,18 @@ def import_mit(
         None, "--acceleration", help="a=… in the file name; 0 selects the paper's subset"
     ),
     speed: float | None = typer.Option(None, "--speed", help="push speed in mm/s (v=…)"),
-    rate: float = typer.Option(10.0, "--rate", help="resampling rate (Hz)"),
+    rate: float = typer.Option(
+        10.0,
+        "--rate",
+        min=0.1,
+        max=250.0,
+        help="resampling rate (Hz; at most the recordings' ~250 Hz)",
+    ),
     as_speed: float | None = typer.Option(
-        None, "--as-speed", help="mm/s: time-rescale each push to this speed (quasi-static)"
+        None,
+        "--as-speed",
+        min=0.1,
+        help="mm/s: time-rescale each push to this speed (quasi-static)",
     ),
     as_json: bool = typer.Option(False, "--json"),
 ):
@@ -554,6 +597,7 @@ def push_cmd(
     from pushtoknow.testbed.objects import load_object_spec
     from pushtoknow.viz import one_push, save_push_strip
 
+    out = _image_out(out)
     try:
         spec = load_object_spec(obj)
         rec, camera = one_push(spec, profile.value, seed)
@@ -704,6 +748,7 @@ def run_inference(
     from pushtoknow.testbed.objects import load_object_spec
     from pushtoknow.viz import plot_estimates, save_push_strip
 
+    _out_folder(out)
     model = load_checkpoint(resolve_model_path(model_ref))
     spec = load_object_spec(object_ref)
     truth = spec.params.as_array()
@@ -1079,6 +1124,8 @@ def error_message(e: BaseException) -> str | None:
         return f"{first_line(e.format_message())} (see --help)"
     if isinstance(e, PushToKnowError):
         return first_line(e)
+    if (summary := _validation_summary(e)) is not None:
+        return summary
     if isinstance(e, OSError) and e.strerror:
         where = f"{e.filename}: " if e.filename else ""
         return f"{where}{e.strerror.lower()}"

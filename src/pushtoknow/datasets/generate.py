@@ -21,7 +21,9 @@ from pushtoknow.common.config import Config
 from pushtoknow.common.errors import DatasetError, ObjectSpecError
 from pushtoknow.datasets.shards import (
     GENERATION_FILE,
+    SHARD_GLOB,
     ObjectEpisode,
+    open_shard,
     shard_is_finished,
     shard_path,
     write_shard,
@@ -135,13 +137,22 @@ def prepare_dataset_dir(out: Path, fingerprint: str, record: dict, refusal: str)
     out.mkdir(parents=True, exist_ok=True)
     gen_file = out / GENERATION_FILE
     if gen_file.exists():
-        old = json.loads(gen_file.read_text())
+        try:
+            old = json.loads(gen_file.read_text())
+        except json.JSONDecodeError as e:
+            raise DatasetError(
+                gen_file, f"unreadable provenance record (not valid JSON: {e})"
+            ) from None
         if old.get("fingerprint") != fingerprint:
             raise DatasetError(
                 out,
                 f"holds a dataset {refusal} (see {GENERATION_FILE}); use another --out directory",
             )
     else:
+        for shard in sorted(out.glob(SHARD_GLOB)):  # a folder whose record was lost: its shards
+            with open_shard(shard) as f:  # decide, before a record is written for them
+                if f.attrs.get("fingerprint") != fingerprint:
+                    raise DatasetError(shard, f"written {refusal}; use another --out directory")
         tmp = gen_file.with_suffix(".json.tmp")
         tmp.write_text(json.dumps({"fingerprint": fingerprint, **record}, indent=1))
         os.replace(tmp, gen_file)

@@ -286,9 +286,17 @@ def dataset_info(root: Path, verify: bool = False) -> dict:
     gen_file = Path(root) / GENERATION_FILE
     if gen_file.exists():
         try:
-            expected = int(json.loads(gen_file.read_text())["config"]["objects"])
+            record = json.loads(gen_file.read_text())
+            expected = int(record["config"]["objects"])
         except (json.JSONDecodeError, KeyError, TypeError, ValueError):
             raise DatasetError(gen_file, "unreadable provenance record") from None
+        if verify:
+            for s in shards:
+                with open_shard(s) as f:
+                    if f.attrs.get("fingerprint") != record.get("fingerprint"):
+                        raise DatasetError(
+                            s, f"written with other settings than {GENERATION_FILE} records"
+                        )
     return {
         "schema_version": SCHEMA_VERSION,
         "testbed_version": max(testbed_versions),

@@ -28,7 +28,7 @@ from shapely.ops import nearest_points
 from pushtoknow.common.errors import IdentificationError, PushToKnowError
 from pushtoknow.common.params import ObjectParams
 from pushtoknow.testbed.config import SimConfig
-from pushtoknow.testbed.objects import COM_MARGIN, MAX_MASS, ObjectSpec
+from pushtoknow.testbed.objects import COM_MARGIN, MAX_MASS, MIN_GYRATION_RADIUS, ObjectSpec
 from pushtoknow.testbed.push import Push
 from pushtoknow.testbed.shapes import Footprint, footprint_from_shape
 
@@ -77,7 +77,8 @@ class ReplayScene:
 
 def feasible(phi: np.ndarray, footprint: Footprint) -> tuple[np.ndarray, float, float]:
     """The nearest simulable φ (5,) SI: CoM inside the footprint by the testbed's margin, I_z
-    below the most this footprint allows, μ below the testbed's limit. Returns (φ, CoM moved
+    between the least the testbed simulates and the most this footprint allows, μ below the
+    testbed's limit. Returns (φ, CoM moved
     (m), excess: Σ (value / bound − 1) over I_z and μ where above their bound)."""
     phi = np.array(phi, dtype=np.float64)
     region = footprint.com_region(COM_MARGIN + COM_INSET)
@@ -94,6 +95,8 @@ def feasible(phi: np.ndarray, footprint: Footprint) -> tuple[np.ndarray, float, 
     if phi[0] > MAX_MASS:  # the replay's limit; I_z keeps its share of the bound
         phi[4] *= MAX_MASS / phi[0]
         phi[0] = MAX_MASS
+    # the testbed's least radius of gyration (a rounding margin above it)
+    phi[4] = max(phi[4], 1.001 * phi[0] * MIN_GYRATION_RADIUS**2)
     return phi, moved, excess
 
 

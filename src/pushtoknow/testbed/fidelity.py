@@ -15,9 +15,10 @@ import numpy as np
 
 from pushtoknow.common.params import GRAVITY, ObjectParams
 from pushtoknow.testbed.config import SimConfig
-from pushtoknow.testbed.objects import ObjectSpec
+from pushtoknow.testbed.objects import ObjectSpec, resolve_shape
 from pushtoknow.testbed.push import Push
 from pushtoknow.testbed.scene import support_points
+from pushtoknow.testbed.shapes import footprint_from_shape
 from pushtoknow.testbed.sim import PushRecord, PushSimulator
 
 START_SHIFT = 5e-5  # m: the start-pose perturbation of the chaos probe (50 µm)
@@ -26,8 +27,7 @@ START_TURN = math.radians(0.05)  # rad: and its rotation (0.05°)
 
 def uniform_inertia(shape: str, mass: float) -> float:
     """I_z (kg·m²) of a uniform plate of `shape` about its centroid (from a fine grid)."""
-    spec = ObjectSpec(shape=shape, params=ObjectParams(mass, 0.5, 0.0, 0.0, 1e-9))
-    pts = support_points(spec.footprint, 0.002, 0.0)
+    pts = support_points(footprint_from_shape(resolve_shape(shape)), 0.002, 0.0)
     return float(mass * np.mean(np.sum(pts**2, axis=1)))
 
 

@@ -16,8 +16,8 @@ The vertices of a `polygon` shape are given in the object frame too, about their
 an off-centroid polygon is refused with its offset, since moving it silently would leave the
 CoM in another frame. What the testbed simulates faithfully (docs/DESIGN.md §3) bounds a spec:
 mass ≤ `MAX_MASS`, footprint width ≥ `MIN_WIDTH` and radius ≤ `MAX_RADIUS`, height ≥
-`MIN_HEIGHT`, the CoM inside the footprint's convex hull (`COM_MARGIN`), I_z below what the
-footprint allows.
+`MIN_HEIGHT` and ≤ `MAX_HEIGHT`, the CoM inside the footprint's convex hull (`COM_MARGIN`), I_z
+between m·`MIN_GYRATION_RADIUS`² and what the footprint allows.
 """
 
 from __future__ import annotations
@@ -59,6 +59,10 @@ MAX_RADIUS = 0.2  # m, centroid to the farthest footprint point: the object and 
 MIN_WIDTH = 0.03  # m, the footprint's smallest width: narrower objects span under 3 pixels of
 # the 64-pixel camera (9.7 mm per pixel), too few for a footprint from S_0
 MIN_HEIGHT = PadConfig().z + PadConfig().half_height  # m: lower objects pass under the pad's top
+MAX_HEIGHT = 0.15  # m: a pushed object this tall would tip in reality (the testbed's cannot)
+MIN_GYRATION_RADIUS = 0.003  # m: I_z ≥ m·(3 mm)². Measured: at 0.45 mm (rect1, 0.5 kg) the
+# simulation breaks down (0.36 N of force against μ·m·g = 2.45 N) and at 0.18 mm (30 kg) the
+# object slides away at 26 N of 589 N; from 1.4 mm up the force is right
 MAX_MASS = 30.0  # kg: heavier objects are not simulated faithfully. Measured on rect1 at μ = 0.5
 # and 20 mm/s: the pad sinks 0.16 mm into 30 kg (below the 0.5 mm pose noise), 0.5 mm into
 # 100 kg and 4.9 mm into 1000 kg, and it passes through 10⁶ kg
@@ -232,6 +236,17 @@ def validate_params(p: ObjectParams, footprint: Footprint, height: float = DEFAU
     if height < MIN_HEIGHT:
         raise ObjectSpecError(
             "height", height, f"below {MIN_HEIGHT:.4f} m the pad passes over the object"
+        )
+    if height > MAX_HEIGHT:
+        raise ObjectSpecError(
+            "height", height, f"above {MAX_HEIGHT} m a pushed object tips (the testbed's cannot)"
+        )
+    if p.inertia < p.mass * MIN_GYRATION_RADIUS**2:
+        raise ObjectSpecError(
+            "inertia",
+            p.inertia,
+            f"below m·({MIN_GYRATION_RADIUS * 1e3:g} mm)² = {p.mass * MIN_GYRATION_RADIUS**2:.2e} "
+            "kg·m² (all the mass within 3 mm of the CoM), where the simulation breaks down",
         )
     com = (p.com_x, p.com_y)
     if not footprint.com_region(COM_MARGIN).contains(Point(*com)):

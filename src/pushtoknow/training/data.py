@@ -10,7 +10,6 @@ from __future__ import annotations
 from dataclasses import dataclass, fields
 from pathlib import Path
 
-import h5py
 import numpy as np
 import torch
 
@@ -65,7 +64,7 @@ def dataset_camera(root: Path) -> tuple[CameraModel, SimConfig]:
     shards = list_shards(root)
     if not shards:
         raise DatasetError(root, "no shards")
-    with h5py.File(shards[0], "r") as f:
+    with open_shard(shards[0]) as f:
         cfg = stored_sim_config(f.attrs["sim_config"])
     return cfg.camera.model(), cfg
 

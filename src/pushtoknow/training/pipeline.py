@@ -106,6 +106,9 @@ class CsvLog:
             self.echo(self.path.stem, row)
 
 
+MIN_TRAINING_OBJECTS = 2  # one to train on and one to validate on, at the least
+
+
 def split_by_object(pt: PushTensors, val_fraction: float, seed: int):
     """(train, val) PushTensors with no object in both."""
     objects = torch.unique(pt.object_index)
@@ -169,17 +172,26 @@ def train_model(
     data, out = Path(data), Path(out)
     if not data.exists():
         raise DatasetError(data, "does not exist")
-    out.mkdir(parents=True, exist_ok=True)
+    if (out / "model.pt").exists():  # never overwrite a finished run
+        raise DatasetError(out, "holds a trained model (model.pt); write the run elsewhere")
+    reused = load_checkpoint(visnet_from).visnet if visnet_from is not None else None
     camera, sim_cfg = dataset_camera(data)
     check_testbed_version(sim_cfg, f"the pushes of dataset {data}")
+    t_start = time.perf_counter()
+    pt = load_push_tensors(data, cfg.max_objects)
+    objects = len(torch.unique(pt.object_index))
+    if objects < MIN_TRAINING_OBJECTS:
+        raise DatasetError(
+            data,
+            f"{objects} object(s); training needs at least {MIN_TRAINING_OBJECTS} (training and "
+            "validation objects)",
+        )
+    out.mkdir(parents=True, exist_ok=True)
     cfg = cfg.model_copy(update={"visnet": visnet_config_for(cfg.visnet, sim_cfg)})
     cfg.to_yaml(out / "config.yaml")  # as run: VisNet's input channels follow the data
     torch.manual_seed(seed)
-    t_start = time.perf_counter()
     timings: dict[str, float] = {}
     vision_only = cfg.variant == "v-ddf"
-
-    pt = load_push_tensors(data, cfg.max_objects)
 
     with Progress(
         "[progress.description]{task.description}",
@@ -191,8 +203,8 @@ def train_model(
     ) as bar:
         # 1. VisNet
         t0 = time.perf_counter()
-        if visnet_from is not None:
-            visnet = load_checkpoint(visnet_from).visnet
+        if reused is not None:
+            visnet = reused
             visnet_summary = {"reused_from": str(visnet_from)}
         else:
             frames = load_frames(data, cfg.visnet.frame_every, cfg.max_objects)
