@@ -24,7 +24,7 @@ def one_push(spec, profile: str = "constant", seed: int = 0):
     view = ex.observe()
     cp, pd = sample_push_affordances(view.s0, ex.camera, 1, rng)
     cfg = ex.sim.config.push
-    speed = cfg.speed if profile == "constant" else cfg.release_peak_speed
+    speed = cfg.profile_speed(profile)
     rec = ex.execute(Push(tuple(cp[0]), float(pd[0]), profile, speed))
     camera = ex.camera
     ex.close()

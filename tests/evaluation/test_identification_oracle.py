@@ -81,3 +81,16 @@ def test_the_oracle_reruns_a_cached_run_without_push_tracks(tmp_path, monkeypatc
     assert suite._inference_run(*args, need_tracks=True).push_tracks is not None and calls
     assert suite._inference_run(*args, need_tracks=True).push_tracks is not None  # re-cached
     assert len(calls) == 1
+
+
+def test_product_relative_error_of_the_final_estimates():
+    import numpy as np
+
+    from pushtoknow.evaluation.suite import MethodRun, product_relative_error
+
+    truth = np.array([[0.5, 0.4, 0, 0, 1e-3], [1.0, 0.5, 0, 0, 1e-3]])
+    product = np.array([[0.3, 0.202], [0.4, 0.45]])  # final: +1 % and −10 %
+    run = MethodRun(np.zeros((2, 2, 5)), np.ones((2, 2, 5)), truth, ["a", "b"], product)
+    r = product_relative_error(run)
+    assert abs(r["max"] - 0.1) < 1e-12
+    assert abs(r["median"] - 0.055) < 1e-12 and r["share_within_2pct"] == 0.5

@@ -67,7 +67,7 @@ def candidate_pushes(num: int, rng: np.random.Generator, push_cfg: PushConfig) -
         cp = (DISC_RADIUS_M * math.cos(alpha), DISC_RADIUS_M * math.sin(alpha))
         direction = alpha + math.pi + rng.uniform(-DIRECTION_JITTER_RAD, DIRECTION_JITTER_RAD)
         profile = PROFILES[i % len(PROFILES)]
-        speed = push_cfg.speed if profile == "constant" else push_cfg.release_peak_speed
+        speed = push_cfg.profile_speed(profile)
         pushes.append(Push(cp, float(direction), profile, speed))
     return pushes
 

@@ -686,23 +686,15 @@ def train(
     )
 
 
-# how parameters are shown: (factor from SI, unit)
-DISPLAY_UNITS = {
-    "mass": (1.0, "kg"),
-    "friction": (1.0, ""),
-    "com_x": (1e3, "mm"),
-    "com_y": (1e3, "mm"),
-    "inertia": (1e3, "g·m²"),
-}
-
-
 def _format_estimate(mean: float, std: float, name: str) -> str:
+    from pushtoknow.common.params import DISPLAY_UNITS
+
     scale, unit = DISPLAY_UNITS[name]
     return f"{mean * scale:.3g} ± {std * scale:.2g} {unit}".strip()
 
 
 def _estimate_table(estimate, truth, title: str) -> Table:
-    from pushtoknow.common.params import PARAM_NAMES
+    from pushtoknow.common.params import DISPLAY_UNITS, PARAM_NAMES
 
     t = Table(title=title, title_justify="left")
     t.add_column("parameter")

@@ -58,8 +58,7 @@ class GenerationConfig(Config):
         return hashlib.sha256(self.model_dump_json().encode()).hexdigest()[:16]
 
     def push_speed(self, profile: str) -> float:
-        p = self.sim.push
-        return p.speed if profile == "constant" else p.release_peak_speed
+        return self.sim.push.profile_speed(profile)
 
 
 def select_objects(objects_from: str, n: int, seed: int) -> list[ObjectSpec]:

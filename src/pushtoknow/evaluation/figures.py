@@ -24,15 +24,16 @@ from matplotlib.figure import Figure
 from matplotlib.patches import Patch
 from scipy.stats import norm
 
-from pushtoknow.common.params import PARAM_NAMES, PARAM_RANGES
+from pushtoknow.common.params import DISPLAY_UNITS, PARAM_NAMES, PARAM_RANGES
 
-# name → (factor from SI to the plotted unit, axis label)
+AXIS_NAMES = {"mass": "mass m", "friction": "friction μ", "com_x": "c_x", "com_y": "c_y",
+              "inertia": "I_z"}  # fmt: skip
+# name → (factor from SI to the plotted unit, axis label), units from `DISPLAY_UNITS`
 DISPLAY: dict[str, tuple[float, str]] = {
-    "mass": (1.0, "mass m (kg)"),
-    "friction": (1.0, "friction μ"),
-    "com_x": (1e3, "c_x (mm)"),
-    "com_y": (1e3, "c_y (mm)"),
-    "inertia": (1e3, "I_z (g·m²)"),
+    **{
+        n: (DISPLAY_UNITS[n][0], f"{a} ({DISPLAY_UNITS[n][1]})" if DISPLAY_UNITS[n][1] else a)
+        for n, a in AXIS_NAMES.items()
+    },
     "overall": (1.0, "overall"),
 }
 CALIBRATION_LEVELS: tuple[float, ...] = tuple(round(0.05 * i, 2) for i in range(1, 20))

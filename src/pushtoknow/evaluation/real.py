@@ -69,7 +69,13 @@ import h5py
 import numpy as np
 
 from pushtoknow.common.errors import DatasetError, IdentificationError
-from pushtoknow.common.params import GRAVITY, PARAM_NAMES, PARAM_RANGES, product_moments
+from pushtoknow.common.params import (
+    DISPLAY_UNITS,
+    GRAVITY,
+    PARAM_NAMES,
+    PARAM_RANGES,
+    product_moments,
+)
 from pushtoknow.datasets.mit_import import IMPORT_FILE, TIME_SCALE_ATTR
 from pushtoknow.datasets.mit_push import mit_object
 from pushtoknow.datasets.shards import list_shards, read_shard
@@ -657,20 +663,10 @@ def _notes(truth, pushes, train_speed, model, mu_true) -> list[str]:
 # ============================================================================================
 # Presentation
 # ============================================================================================
-DISPLAY = {  # (factor from SI, unit)
-    "mass": (1.0, "kg"),
-    "friction": (1.0, ""),
-    "com_x": (1e3, "mm"),
-    "com_y": (1e3, "mm"),
-    "inertia": (1e3, "g·m²"),
-    "mu_m": (1.0, "kg"),
-}
-
-
 def _fmt(v, name: str, std=None) -> str:
     if v is None:
         return "—"
-    f, _ = DISPLAY[name]
+    f, _ = DISPLAY_UNITS[name]
     return f"{v * f:.3g}" if std is None else f"{v * f:.3g} ± {std * f:.2g}"
 
 
@@ -688,7 +684,7 @@ def table_rows(report: dict) -> tuple[list[str], list[list[str]]]:
     header.append("prior mean")
     rows = []
     for p in PARAM_NAMES:
-        unit = DISPLAY[p][1]
+        unit = DISPLAY_UNITS[p][1]
         fp = report["filter"]["prior"][p]
         row = [f"{p} ({unit})" if unit else p, _fmt(report["truth"][p], p)]
         row.append(_fmt(fp["mean"], p, fp["std"]))

@@ -80,6 +80,21 @@ class EvaluationConfig(Config):
     )
 
 
+def product_relative_error(run: MethodRun, threshold: float = 0.02) -> dict:
+    """|μ·m estimate / truth − 1| of the final estimates: median, max and the share within
+    `threshold`."""
+    truth = run.truth[:, 0] * run.truth[:, 1]
+    final = (
+        run.product[:, -1] if run.product is not None else run.mean[:, -1, 0] * run.mean[:, -1, 1]
+    )
+    rel = np.abs(final / truth - 1.0)
+    return {
+        "median": float(np.median(rel)),
+        "max": float(np.max(rel)),
+        f"share_within_{round(100 * threshold)}pct": float(np.mean(rel <= threshold)),
+    }
+
+
 @dataclass
 class MethodRun:
     """Estimates of one method on one set: mean, std (N, K+1, 5) SI after k = 0..K pushes,
@@ -406,6 +421,7 @@ def run_evaluation(
                 "upper bound: the simulator's own physics, the true footprint, the same pushes; "
                 "final estimate only (per_push: prior, after all pushes)"
             )
+            summary["mu_m_relative_error"] = product_relative_error(methods[ORACLE_KEY])
         runs_for_figures[set_name] = figure_methods
     results["methods"] = results["sets"]["heldout"]["methods"]
     results["primary"] = f"{names[0]}:{cfg.policies[0]}"

@@ -56,7 +56,7 @@ def simulate_pushes(
     out = []
     try:
         for profile in profiles:
-            speed = cfg.push.speed if profile == "constant" else cfg.push.release_peak_speed
+            speed = cfg.push.profile_speed(profile)
             if centred:
                 sim.reset((0.0, 0.0, 0.0))
                 x0 = float(spec.footprint.polygon.bounds[0])

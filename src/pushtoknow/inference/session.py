@@ -48,7 +48,7 @@ from pushtoknow.perception.footprint import footprint_from_mask
 from pushtoknow.perception.visnet import frames_as_tensors, visnet_measure
 from pushtoknow.testbed.config import SimConfig
 from pushtoknow.testbed.executor import PushExecutor, View
-from pushtoknow.testbed.push import ProfileName, Push
+from pushtoknow.testbed.push import PROFILES, ProfileName, Push
 from pushtoknow.testbed.sim import PushRecord
 
 
@@ -71,7 +71,7 @@ class InferenceConfig(Config):
 
 def profile_speeds(sim_config: SimConfig) -> dict[str, float]:
     """The characteristic speed v (m/s) of each profile under the testbed's push settings."""
-    return {"constant": sim_config.push.speed, "release": sim_config.push.release_peak_speed}
+    return {p: sim_config.push.profile_speed(p) for p in PROFILES}
 
 
 INTERVAL_LEVEL = 0.9  # the interval every estimate reports

@@ -115,6 +115,11 @@ class PushConfig(Config):
         "free (objects with μ ≥ release_decel/g follow the pad instead)",
     )
 
+    def profile_speed(self, profile: str) -> float:
+        """The characteristic speed (m/s) of a speed profile: the constant speed, or the
+        release's peak."""
+        return self.speed if profile == "constant" else self.release_peak_speed
+
 
 TESTBED_VERSION = 2
 """Physics version of the testbed. 1: free-joint object on soft point supports (chaotic, not

@@ -59,7 +59,7 @@ def push_through(
     cfg = config or SimConfig()
     left = _entry_x(spec, offset, theta)
     if speed is None:
-        speed = cfg.push.speed if profile == "constant" else cfg.push.release_peak_speed
+        speed = cfg.push.profile_speed(profile)
     sim = PushSimulator(spec, cfg)
     try:
         sim.reset(start_pose)
