@@ -80,10 +80,8 @@ from pushtoknow.datasets.mit_import import IMPORT_FILE, TIME_SCALE_ATTR
 from pushtoknow.datasets.mit_push import mit_object
 from pushtoknow.datasets.shards import list_shards, read_shard
 from pushtoknow.evaluation.metrics import param_ranges
-from pushtoknow.testbed.config import PushConfig
 
 __all__ = [
-    "DEFAULT_TRAINING_SPEED",
     "PURE_TRANSLATION_DEG",
     "REPORT_KEYS",
     "estimate_real_object",
@@ -98,7 +96,6 @@ PURE_TRANSLATION_DEG = 2.0  # |Δθ| below this over a push: a pure translation
 MIN_SLIDE = 0.01  # m: a push whose object travelled less did not really slide (a glancing push)
 # Push speed of the training data when the checkpoint does not record it (as `infer_object`):
 # the simulator's default constant speed, that of the shipped model's data.
-DEFAULT_TRAINING_SPEED = PushConfig().speed  # m/s
 REPORT_KEYS = (
     "object",
     "data_dir",
@@ -434,7 +431,7 @@ def estimate_real_object(
 
     t0 = time.perf_counter()
     model = load_checkpoint(Path(model_path))
-    train_speed = float(model.info.get("push_speed", DEFAULT_TRAINING_SPEED))
+    train_speed = model.sim_config.push.speed  # the constant pushes it was trained on
     with tempfile.TemporaryDirectory(prefix="pushtoknow-mit-") as tmp:
         target = Path(import_dir) if import_dir is not None else Path(tmp) / "import"
         ds_dir, conversion = prepare_real_data(

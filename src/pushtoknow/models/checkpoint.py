@@ -116,9 +116,9 @@ class InferenceSettings(Config):
 
 @dataclass
 class TrainedModel:
-    """Everything inference needs. camera: the camera of the training images; push_speed:
-    the constant push speed of the training data (m/s); info: provenance (data seed, training
-    config, validation numbers), free-form JSON."""
+    """Everything inference needs. camera: the camera of the training images; info:
+    provenance (data seed, training config, validation numbers), free-form JSON; the testbed
+    settings of the training data are typed (`sim_config`, `profiles`)."""
 
     variant: Variant
     models_config: LearnedModelsConfig
