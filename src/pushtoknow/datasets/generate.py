@@ -180,17 +180,9 @@ def write_pending_shards(
     ]
     skipped = len(plan) - len(todo)
 
-    from rich.console import Console
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
+    from pushtoknow.common.progress import progress_bar
 
-    with Progress(
-        "[progress.description]{task.description}",
-        BarColumn(),
-        MofNCompleteColumn(),
-        TimeRemainingColumn(),
-        disable=not progress,
-        console=Console(stderr=True),  # progress on stderr, results on stdout
-    ) as bar:
+    with progress_bar(progress) as bar:
         task = bar.add_task(
             f"{description} ({skipped} shards already done)", total=sum(len(t[2]) for t in todo)
         )

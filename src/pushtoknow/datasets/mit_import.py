@@ -518,20 +518,12 @@ def import_mit_dataset(
     skipped = len(plan) - len(todo)
     total = sum(len(o["files"]) for i in todo for o in plan[i])
 
-    from rich.console import Console
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
+    from pushtoknow.common.progress import progress_bar
 
     renderers: dict[str, MitRenderer] = {}
     converted = 0
     try:
-        with Progress(
-            "[progress.description]{task.description}",
-            BarColumn(),
-            MofNCompleteColumn(),
-            TimeRemainingColumn(),
-            disable=not progress,
-            console=Console(stderr=True),  # progress on stderr, results on stdout
-        ) as bar:
+        with progress_bar(progress) as bar:
             task = bar.add_task(f"importing MIT Push ({skipped} shards already done)", total=total)
             for i in todo:
                 episodes, object_attrs, push_attrs = [], [], []

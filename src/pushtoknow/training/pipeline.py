@@ -166,8 +166,7 @@ def train_model(
     echo=None,
 ) -> TrainedModel:
     """Train `cfg.variant` on the dataset in `data`; write the run to `out` (see module doc)."""
-    from rich.console import Console
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn
+    from pushtoknow.common.progress import progress_bar
 
     data, out = Path(data), Path(out)
     if not data.exists():
@@ -193,14 +192,7 @@ def train_model(
     timings: dict[str, float] = {}
     vision_only = cfg.variant == "v-ddf"
 
-    with Progress(
-        "[progress.description]{task.description}",
-        BarColumn(),
-        MofNCompleteColumn(),
-        TimeElapsedColumn(),
-        disable=not progress,
-        console=Console(stderr=True),  # progress on stderr, results on stdout
-    ) as bar:
+    with progress_bar(progress, remaining=False) as bar:
         # 1. VisNet
         t0 = time.perf_counter()
         if reused is not None:
