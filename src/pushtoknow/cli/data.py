@@ -1,0 +1,195 @@
+"""`pushtoknow` commands: data (simulate, dataset info, import-mit, collect)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import typer
+from rich.table import Table
+
+from pushtoknow.cli.options import (
+    PolicyChoice,
+    policy_option,
+    seed_option,
+    sigma_points_option,
+)
+from pushtoknow.cli.shared import (
+    app,
+    console,
+    dataset_app,
+    err_console,
+    fail,
+    parse_profiles,
+    print_result,
+)
+from pushtoknow.common.errors import PushToKnowError
+
+
+@app.command()
+def simulate(
+    out: Path = typer.Option(..., "--out", help="output directory (resumed if it exists)"),
+    objects: int = typer.Option(4, "--objects", min=1),
+    pushes: int = typer.Option(2, "--pushes", min=1, help="pushes per object"),
+    seed: int = seed_option(),
+    workers: int = typer.Option(1, "--workers", min=1),
+    objects_from: str = typer.Option(
+        "catalogue",
+        "--objects-from",
+        help="catalogue | catalogue-train | catalogue-test | continuous | "
+        "catalogue-train+continuous (alternately) | FILE (JSON/YAML specs)",
+    ),
+    profiles: str = typer.Option(
+        "constant", "--profiles", help="comma-separated speed profiles: constant,release"
+    ),
+    objects_per_shard: int = typer.Option(4, "--objects-per-shard", min=1),
+    config: Path | None = typer.Option(None, "--config", help="SimConfig YAML"),
+):
+    """Simulate pushes and write an HDF5 dataset (atomic shards, resumable)."""
+    from pushtoknow.datasets.generate import GenerationConfig, generate_dataset
+    from pushtoknow.testbed.config import SimConfig
+
+    try:
+        sim = SimConfig.from_yaml(config) if config else SimConfig()
+        cfg = GenerationConfig(
+            objects=objects,
+            pushes=pushes,
+            seed=seed,
+            objects_from=objects_from,
+            profiles=parse_profiles(profiles),
+            objects_per_shard=objects_per_shard,
+            sim=sim,
+        )
+        res = generate_dataset(out, cfg, workers=workers)
+    except (PushToKnowError, ValueError) as e:
+        fail(e)
+    console.print(
+        f"wrote {res['shards_written']} shards, skipped {res['shards_skipped']} "
+        f"finished ones → {out}"
+    )
+
+
+@dataset_app.command("info")
+def dataset_info_cmd(
+    root: Path,
+    as_json: bool = typer.Option(False, "--json"),
+    verify: bool = typer.Option(
+        False, "--verify", help="read every shard and check its checksums and content digest"
+    ),
+):
+    """Summarise a dataset directory."""
+    from pushtoknow.datasets.shards import dataset_info
+
+    try:
+        info = dataset_info(root, verify=verify)
+    except PushToKnowError as e:
+        fail(e)
+    if info["complete"] is False:
+        err_console.print(
+            f"[bold yellow]incomplete:[/] {info['objects']} of {info['expected_objects']} objects "
+            "written (an interrupted run: the same command resumes it)"
+        )
+    if as_json:
+        print(json.dumps(info))
+        return
+    t = Table(title=str(root))
+    t.add_column("field")
+    t.add_column("value")
+    for k, v in info.items():
+        t.add_row(k, str(v))
+    console.print(t)
+
+
+@app.command("import-mit")
+def import_mit(
+    src: Path = typer.Argument(
+        ..., help="folder of MIT Push .json/.h5 files (searched recursively)"
+    ),
+    out: Path = typer.Option(..., "--out"),
+    surface: str | None = typer.Option(None, "--surface", help="e.g. plywood, abs, delrin"),
+    shape: str | None = typer.Option(None, "--shape", help="e.g. rect1"),
+    acceleration: float | None = typer.Option(
+        None, "--acceleration", help="a=… in the file name; 0 selects the paper's subset"
+    ),
+    speed: float | None = typer.Option(None, "--speed", help="push speed in mm/s (v=…)"),
+    rate: float = typer.Option(
+        10.0,
+        "--rate",
+        min=0.1,
+        max=250.0,
+        help="resampling rate (Hz; at most the recordings' ~250 Hz)",
+    ),
+    as_speed: float | None = typer.Option(
+        None,
+        "--as-speed",
+        min=0.1,
+        help="mm/s: time-rescale each push to this speed (quasi-static)",
+    ),
+    as_json: bool = typer.Option(False, "--json"),
+):
+    """Convert MIT Push recordings into the project's dataset format (synthetic RGB-D)."""
+    from pushtoknow.datasets.mit_import import import_mit_dataset
+
+    try:
+        res = import_mit_dataset(
+            src,
+            out,
+            surface=surface,
+            shape=shape,
+            acceleration=acceleration,
+            speed=None if speed is None else speed / 1000.0,
+            rate=rate,
+            as_speed=None if as_speed is None else as_speed / 1000.0,
+        )
+    except PushToKnowError as e:
+        fail(e)
+    print_result(res, as_json, f"imported into {out}")
+
+
+@app.command()
+def collect(
+    model: str = typer.Option(..., "--model", help="RUN directory, model.pt or 'pretrained'"),
+    policy: PolicyChoice = policy_option(None, "push policy (required)"),
+    objects: int = typer.Option(4, "--objects", min=1),
+    pushes: int = typer.Option(2, "--pushes", min=1, help="pushes per object"),
+    seed: int = seed_option(),
+    out: Path = typer.Option(..., "--out", help="output directory (resumed if it exists)"),
+    objects_from: str = typer.Option(
+        "catalogue-train",
+        "--objects-from",
+        help="catalogue | catalogue-train | catalogue-test | continuous | FILE",
+    ),
+    first_object_index: int = typer.Option(
+        0, "--first-object-index", min=0, help="skip this many objects of the seeded order"
+    ),
+    workers: int = typer.Option(1, "--workers", min=1),
+    candidates: int = typer.Option(16, "--candidates", min=1),
+    sigma_points: int = sigma_points_option(),
+):
+    """Collect training data with a push policy and a trained model (the filter runs, so active
+    policies choose each push for the current belief); writes shards like `simulate`."""
+    from pushtoknow.collection.collect import collect_dataset
+    from pushtoknow.pretrained import resolve_model_path
+
+    if policy is None:
+        raise typer.BadParameter("--policy is required")
+    try:
+        res = collect_dataset(
+            out,
+            resolve_model_path(model),
+            policy.value,
+            objects_from,
+            objects,
+            pushes,
+            seed,
+            workers,
+            first_object_index,
+            candidates=candidates,
+            num_sigma_points=sigma_points,
+        )
+    except (PushToKnowError, ValueError) as e:
+        fail(e)
+    console.print(
+        f"wrote {res['shards_written']} shards, skipped {res['shards_skipped']} finished ones "
+        f"({res['objects']} objects × {pushes} pushes, {policy.value}) → {out}"
+    )

@@ -1,0 +1,312 @@
+"""`pushtoknow` commands: evaluation (evaluate-heldout, ablate-profiles, evaluate,
+ablate-efficiency)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import typer
+from rich.table import Table
+
+from pushtoknow.cli.options import (
+    SEED_HELP,
+    PolicyChoice,
+    policy_option,
+    seed_option,
+)
+from pushtoknow.cli.shared import (
+    PROFILES_HELP,
+    app,
+    command_line,
+    console,
+    err_console,
+    fail,
+    parse_profiles,
+    save_and_print_json,
+)
+from pushtoknow.common.errors import PushToKnowError
+
+
+@app.command("evaluate-heldout")
+def evaluate_heldout_cmd(
+    ctx: typer.Context,
+    model: str = typer.Option("pretrained", "--model"),
+    objects: int = typer.Option(
+        88, "--objects", min=1, max=88, help="held-out catalogue objects (≤ 88)"
+    ),
+    pushes: int = typer.Option(5, "--pushes", min=1),
+    policy: PolicyChoice = policy_option(),
+    seed: int = seed_option(),
+    workers: int = typer.Option(2, "--workers", min=1),
+    out: Path = typer.Option(None, "--out", help="write the metrics JSON here"),
+    as_json: bool = typer.Option(False, "--json"),
+    profiles: str = typer.Option(None, "--profiles", help=PROFILES_HELP),
+    markdown: Path | None = typer.Option(
+        None, "--markdown", help="write the report section (markdown) here"
+    ),
+):
+    """NRMSE after each of K pushes on held-out catalogue objects (the catalogue's test split),
+    with the prior-mean predictor and the coverage of the 68% / 90% intervals."""
+    profile_names = None if profiles is None else parse_profiles(profiles)
+    policy_name = policy.value
+    if out is not None and out.is_dir():
+        raise typer.BadParameter(f"--out {out}: is a folder; give the metrics JSON file")
+    import numpy as np
+    from rich.progress import Progress
+
+    from pushtoknow.common.params import PARAM_NAMES
+    from pushtoknow.evaluation.heldout import (
+        evaluate_heldout,
+        heldout_metrics,
+        heldout_object_ids,
+    )
+    from pushtoknow.pretrained import resolve_model_path
+
+    ids = heldout_object_ids(objects, seed)
+    n = len(ids)
+    path = resolve_model_path(model)
+    if profile_names is None:
+        from pushtoknow.models.checkpoint import load_checkpoint
+
+        profile_names = load_checkpoint(path).profiles
+    with Progress(console=err_console) as bar:
+        task = bar.add_task("held-out objects", total=n)
+        run = evaluate_heldout(
+            path,
+            ids,
+            pushes,
+            policy_name,
+            seed,
+            workers,
+            progress=lambda: bar.advance(task),
+            profiles=profile_names,
+        )
+    metrics = heldout_metrics(run)
+    metrics.update(
+        {
+            "model": str(path),
+            "policy": policy_name,
+            "profiles": list(profile_names),
+            "pushes": pushes,
+            "seed": seed,
+            "object_ids": ids,
+            "seconds_per_object_median": float(np.median(run.seconds)),
+            "per_object": [
+                {
+                    "id": i,
+                    "truth": run.truth[n].tolist(),
+                    "mean": run.mean[n, -1].tolist(),
+                    "std": run.std[n, -1].tolist(),
+                }
+                for n, i in enumerate(run.ids)
+            ],
+        }
+    )
+    if markdown is not None:
+        from pushtoknow.evaluation.report import heldout_markdown
+
+        markdown.write_text(heldout_markdown(metrics, command_line(ctx)) + "\n")
+    if save_and_print_json(metrics, out, as_json):
+        return
+    t = Table(title=f"NRMSE on {n} held-out objects ({policy_name}, seed {seed})")
+    for c in ["after push", *PARAM_NAMES, "overall", "μ·m", "coverage90"]:
+        t.add_column(c, justify="right")
+    fmt = lambda r: [f"{r[k]:.3f}" for k in (*PARAM_NAMES, "overall", "mu_m")]  # noqa: E731
+    t.add_row("prior mean", *fmt(metrics["prior_mean"]), "")
+    for r in metrics["per_push"]:
+        t.add_row(str(r["push"]), *fmt(r), f"{r['coverage90']['overall']:.2f}")
+    console.print(t)
+
+
+@app.command("ablate-profiles")
+def ablate_profiles_cmd(
+    model: str = typer.Option(..., "--model", help="RUN trained on constant and release pushes"),
+    out: Path = typer.Option(..., "--out", help="profiles.json, one JSON per condition"),
+    objects: int = typer.Option(44, "--objects", help="held-out catalogue objects (≤ 88)"),
+    pushes: int = typer.Option(5, "--pushes", min=1),
+    conditions: list[str] = typer.Option(
+        None,
+        "--condition",
+        help="POLICY:PROFILES, repeatable (default: uniform and active-entropy, each with "
+        "constant and with constant,release)",
+    ),
+    reference: str = typer.Option(
+        None, "--reference", help="also run this model (e.g. pretrained) uniform, constant"
+    ),
+    folds: int = typer.Option(4, "--folds", min=2),
+    seed: int = seed_option(),
+    workers: int = typer.Option(2, "--workers", min=1),
+    markdown: Path = typer.Option(None, "--markdown", help="write the RESULTS.md section here"),
+):
+    """Speed-profile ablation: NRMSE of m, μ, I_z (and the rest) after K pushes
+    when the policy may or may not use release pushes, on the same held-out objects."""
+    from rich.progress import Progress
+
+    from pushtoknow.common.policies import POLICY_NAMES
+    from pushtoknow.evaluation.heldout import heldout_object_ids
+    from pushtoknow.evaluation.profiles import (
+        DEFAULT_CONDITIONS,
+        parse_condition,
+        profiles_markdown,
+        run_profile_ablation,
+    )
+    from pushtoknow.pretrained import resolve_model_path
+
+    conds = [parse_condition(c) for c in conditions] if conditions else list(DEFAULT_CONDITIONS)
+    for policy, profiles in conds:
+        if policy not in POLICY_NAMES:
+            raise typer.BadParameter(f"--condition policy must be one of {', '.join(POLICY_NAMES)}")
+        parse_profiles(",".join(profiles))
+    ids = heldout_object_ids(objects, seed)
+    with Progress(console=err_console) as bar:
+
+        def progress(name: str, total: int):
+            task = bar.add_task(name, total=total)
+            return lambda: bar.advance(task)
+
+        report = run_profile_ablation(
+            resolve_model_path(model),
+            ids,
+            out,
+            conds,
+            pushes,
+            seed,
+            workers,
+            folds,
+            progress,
+            resolve_model_path(reference) if reference else None,
+        )
+    command = f"pushtoknow ablate-profiles --model {model} --out {out} --objects {objects}"
+    command += f" --seed {seed}" + (f" --reference {reference}" if reference else "")
+    text = profiles_markdown(report, command)
+    if markdown is not None:
+        markdown.write_text(text + "\n")
+    console.print(text)
+
+
+@app.command("evaluate")
+def evaluate_cmd(
+    ctx: typer.Context,
+    data: Path = typer.Option(..., "--data", help="training dataset (forest + prior-mean fit)"),
+    models: list[str] = typer.Option(
+        ..., "--models", help="trained runs (RUN dir, model.pt or 'pretrained'); repeat the flag"
+    ),
+    folds: int = typer.Option(None, "--folds", min=2, help="default: the config's (5)"),
+    out: Path = typer.Option(..., "--out", help="report folder: results.json, RESULTS.md, figures"),
+    config: Path = typer.Option(None, "--config", help="YAML EvaluationConfig"),
+    seed: int = seed_option(None, "default: the config's; " + SEED_HELP),
+    workers: int = typer.Option(None, "--workers", min=1),
+    append: list[Path] = typer.Option(
+        [], "--append", help="markdown file appended to RESULTS.md (e.g. estimate-real's)"
+    ),
+    as_json: bool = typer.Option(False, "--json", help="print results.json to stdout"),
+    oracle: bool = typer.Option(
+        None,
+        "--oracle/--no-oracle",
+        help="add the 'oracle' row: physics-based identification on the same pushes with the "
+        "true footprint and the simulator's own physics, an upper bound (~40 s per object)",
+    ),
+):
+    """Prior mean, random forest (ground-truth and VisNet poses), each model and push policy on
+    held-out and novel objects: NRMSE (mean ± std over folds), coverage, figures, RESULTS.md."""
+
+    from rich.progress import Progress
+
+    from pushtoknow.evaluation.report import render_report
+    from pushtoknow.evaluation.suite import EvaluationConfig, run_evaluation
+    from pushtoknow.pretrained import resolve_model_path
+
+    cfg = EvaluationConfig.from_yaml(config) if config else EvaluationConfig()
+    overrides = {"folds": folds, "seed": seed, "workers": workers, "oracle": oracle}
+    cfg = cfg.model_copy(update={k: v for k, v in overrides.items() if v is not None})
+    cfg = EvaluationConfig.model_validate(cfg.model_dump())
+    refs = [r for m in models for r in m.split(",") if r]
+    paths = [resolve_model_path(r) for r in refs]
+    extra = [Path(a).read_text() for a in append]  # read first: fail before hours of work
+    with Progress(console=err_console) as bar:
+
+        def progress(desc: str, total: int):
+            task = bar.add_task(desc, total=total)
+            return lambda: bar.advance(task)
+
+        results = run_evaluation(
+            data, paths, cfg, out, progress=progress, echo=lambda m: err_console.print(m)
+        )
+    command = command_line(ctx)
+    (out / "RESULTS.md").write_text(render_report(results, command, extra))
+    if as_json:
+        print(json.dumps({k: results[k] for k in ("methods", "primary", "config")}))
+        return
+    from pushtoknow.evaluation.report import COLUMNS
+
+    for set_name, s in results["sets"].items():
+        t = Table(title=f"NRMSE after {cfg.pushes} pushes, {set_name} ({len(s['objects'])})")
+        for c in ["method", *COLUMNS, "μ·m", "cov90"]:
+            t.add_column(c, justify="right")
+        for name, m in s["methods"].items():
+            cells = [f"{m['nrmse'][k]:.3f}±{m['nrmse_std'][k]:.3f}" for k in COLUMNS]
+            t.add_row(name, *cells, f"{m['mu_m']:.3f}", f"{m['coverage90']:.2f}")
+        console.print(t)
+    console.print(f"wrote {out / 'results.json'}, {out / 'RESULTS.md'} and {out / 'figures'}")
+
+
+@app.command("ablate-efficiency")
+def ablate_efficiency(
+    ctx: typer.Context,
+    config: Path = typer.Option(..., "--config", help="YAML EfficiencyConfig"),
+    out: Path = typer.Option(..., "--out", help="ablation folder (resumed if it exists)"),
+    seed: int = seed_option(help="base seed (≥ 0): replicates use seed + config seeds"),
+    workers: int = typer.Option(None, "--workers", min=1, help="default: the config's"),
+    as_json: bool = typer.Option(False, "--json", help="print efficiency.json to stdout"),
+    markdown: Path | None = typer.Option(
+        None, "--markdown", help="write the report section (markdown) here"
+    ),
+):
+    """Learning efficiency (paper Fig. 4b): validation loss versus training pushes for data
+    collected with each policy, over seeds; writes efficiency.json/.csv/.png."""
+    from pushtoknow.collection.efficiency import EfficiencyConfig, figure_series, run_efficiency
+    from pushtoknow.evaluation.figures import plot_learning_efficiency
+
+    try:
+        cfg = EfficiencyConfig.from_yaml(config)
+    except OSError as e:
+        fail(ValueError(f"{config}: {e.strerror}"))
+    except PushToKnowError as e:
+        fail(e)
+    try:
+        results = run_efficiency(
+            cfg, out, seed, workers, log=lambda m: err_console.print(f"[dim]efficiency[/] {m}")
+        )
+    except (PushToKnowError, ValueError) as e:
+        fail(e)
+    series = figure_series(results, "nll")
+    if series:
+        plot_learning_efficiency(
+            series,
+            out / "efficiency.png",
+            ylabel="validation parameter NLL",
+            title=f"learning efficiency ({len(cfg.seeds)} seeds, mean ± std)",
+        )
+    if markdown is not None:
+        from pushtoknow.evaluation.report import efficiency_markdown
+
+        markdown.write_text(efficiency_markdown(results, command_line(ctx)) + "\n")
+    if as_json:
+        print(json.dumps(results))
+        return
+    t = Table(title="validation loss vs training pushes (mean ± std over seeds)")
+    for c in ("policy", "pushes", "param NLL", "param RMSE (norm.)"):
+        t.add_column(c, justify="right")
+    for p, rows in results.items():
+        for r in rows:
+            t.add_row(
+                p,
+                str(r["pushes"]),
+                f"{r['mean']:.4g} ± {r['std']:.2g}",
+                f"{r['rmse_mean']:.3f} ± {r['rmse_std']:.3f}",
+            )
+    console.print(t)
+    console.print(
+        f"wrote {out / 'efficiency.json'}, {out / 'efficiency.csv'}, {out / 'efficiency.png'}"
+    )

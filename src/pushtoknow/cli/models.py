@@ -1,0 +1,278 @@
+"""`pushtoknow` commands: models (push, train, infer, demo)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import typer
+from rich.console import Console
+from rich.table import Table
+
+from pushtoknow.cli.options import (
+    PolicyChoice,
+    policy_option,
+    seed_option,
+    sigma_points_option,
+)
+from pushtoknow.cli.shared import (
+    PROFILES_HELP,
+    ProfileName,
+    app,
+    console,
+    err_console,
+    fail,
+    image_out,
+    out_folder,
+    parse_profiles,
+)
+from pushtoknow.common.errors import PushToKnowError
+
+
+@app.command("push")
+def push_cmd(
+    obj: str = typer.Option("catalogue:0", "--object", help="catalogue:ID or a JSON/YAML spec"),
+    profile: ProfileName = typer.Option(ProfileName.constant, "--profile", help="speed profile"),
+    seed: int = seed_option(),
+    out: Path = typer.Option(Path("push.png"), "--out", help="frame strip + force plot PNG"),
+    as_json: bool = typer.Option(False, "--json"),
+):
+    """Simulate one push on an object, print its summary and save a strip of frames."""
+    from pushtoknow.testbed.objects import load_object_spec
+    from pushtoknow.viz import one_push, save_push_strip
+
+    out = image_out(out)
+    try:
+        spec = load_object_spec(obj)
+        rec, camera = one_push(spec, profile.value, seed)
+    except PushToKnowError as e:
+        fail(e)
+    save_push_strip(rec, camera, out, title=f"{spec.name} ({profile.value})")
+    summary = _push_summary(spec, rec)
+    if as_json:
+        print(json.dumps(summary))
+        return
+    _print_push_summary(spec, summary)
+    console.print(f"frame strip → {out}")
+
+
+def _push_summary(spec, rec) -> dict:
+    import numpy as np
+
+    from pushtoknow.common.params import GRAVITY
+
+    f = np.linalg.norm(rec.force_clean, axis=1)
+    touching = rec.tactile[:, 2] > 0
+    d = rec.pose[-1] - rec.pose[0]
+    return {
+        "object": spec.to_dict(),
+        "push": {
+            "contact": list(rec.push.contact),
+            "direction": rec.push.direction,
+            "profile": rec.push.profile,
+            "speed": rec.push.speed,
+        },
+        "displacement_m": float(np.hypot(d[0], d[1])),
+        "rotation_deg": float(np.degrees(d[2])),
+        "mean_force_in_contact_N": float(f[touching].mean()) if touching.any() else 0.0,
+        "mu_m_g_N": spec.params.friction * spec.params.mass * GRAVITY,
+        "samples": len(rec.time),
+    }
+
+
+def _print_push_summary(spec, s: dict) -> None:
+    t = Table(title=f"one push on {spec.name}")
+    t.add_column("quantity")
+    t.add_column("value", justify="right")
+    p = spec.params
+    t.add_row("mass / friction", f"{p.mass:.3f} kg / {p.friction:.2f}")
+    t.add_row("CoM (x, y)", f"({p.com_x * 1e3:+.1f}, {p.com_y * 1e3:+.1f}) mm")
+    t.add_row("inertia", f"{p.inertia * 1e3:.2f} g·m²")
+    t.add_row("profile", s["push"]["profile"])
+    t.add_row("displacement", f"{s['displacement_m'] * 100:.1f} cm")
+    t.add_row("rotation", f"{s['rotation_deg']:+.1f}°")
+    t.add_row("mean ‖F‖ in contact", f"{s['mean_force_in_contact_N']:.2f} N")
+    t.add_row("μ·m·g", f"{s['mu_m_g_N']:.2f} N")
+    console.print(t)
+
+
+@app.command()
+def train(
+    data: Path = typer.Option(..., "--data", help="dataset directory (`pushtoknow simulate`)"),
+    out: Path = typer.Option(..., "--out", help="run directory to write"),
+    variant: str = typer.Option("vt-addf", "--variant", help="vt-addf | vt-jdf | v-ddf"),
+    config: Path = typer.Option(None, "--config", help="YAML TrainConfig"),
+    seed: int = seed_option(),
+    visnet_from: Path = typer.Option(
+        None, "--visnet-from", help="reuse the VisNet of this run instead of training one"
+    ),
+):
+    """Train VisNet, then the filter's networks (supervised, then end to end), calibrate the
+    inference settings, and write RUN/model.pt with configs, curves and training.json."""
+    from pushtoknow.training.pipeline import TrainConfig, train_model
+
+    if variant not in ("vt-addf", "vt-jdf", "v-ddf"):
+        fail(ValueError(f"--variant must be vt-addf, vt-jdf or v-ddf, got {variant!r}"))
+    cfg = TrainConfig.from_yaml(config) if config else TrainConfig()
+    cfg = cfg.model_copy(update={"variant": variant})
+
+    def echo(stage: str, row: dict) -> None:
+        keys = [k for k in row if k.startswith("val_") or k in ("epoch", "step", "train_loss")]
+        brief = ", ".join(
+            f"{k}={row[k]:.4g}" if isinstance(row[k], float) else f"{k}={row[k]}" for k in keys[:7]
+        )
+        err_console.print(f"[dim]{stage}[/] {brief}")
+
+    model = train_model(data, out, cfg, seed, visnet_from=visnet_from, echo=echo)
+    console.print(
+        f"wrote {out / 'model.pt'} ({model.info['timings']['total_s']:.0f} s); "
+        f"inference settings: {model.inference.model_dump()}"
+    )
+
+
+def _format_estimate(mean: float, std: float, name: str) -> str:
+    from pushtoknow.common.params import DISPLAY_UNITS
+
+    scale, unit = DISPLAY_UNITS[name]
+    return f"{mean * scale:.3g} ± {std * scale:.2g} {unit}".strip()
+
+
+def _estimate_table(estimate, truth, title: str) -> Table:
+    from pushtoknow.common.params import DISPLAY_UNITS, PARAM_NAMES
+
+    t = Table(title=title, title_justify="left")
+    t.add_column("parameter")
+    t.add_column("estimate (mean ± std)", justify="right")
+    t.add_column("90% interval", justify="right")
+    if truth is not None:
+        t.add_column("truth", justify="right")
+        t.add_column("|z| (>1.64: outside)", justify="right")
+        zscores = abs(estimate.zscore(truth))
+    lo, hi = estimate.interval(0.9)
+    for j, name in enumerate(PARAM_NAMES):
+        scale, unit = DISPLAY_UNITS[name]
+        row = [
+            name,
+            _format_estimate(estimate.mean[j], estimate.std[j], name),
+            f"{lo[j] * scale:.3g} – {hi[j] * scale:.3g}",
+        ]
+        if truth is not None:
+            row += [f"{truth[j] * scale:.3g} {unit}".strip(), f"{zscores[j]:.1f}"]
+        t.add_row(*row)
+    return t
+
+
+def run_inference(
+    model_ref: str,
+    object_ref: str,
+    pushes: int,
+    policy: str,
+    seed: int,
+    out: Path | None,
+    as_json: bool,
+    strip: bool = False,
+    sigma_points: int | None = None,
+    profiles: tuple[str, ...] | None = None,
+) -> dict:
+    """Shared by `infer` and `demo`: K pushes on the testbed, tables, plot, JSON. profiles:
+    None for those the model was trained on."""
+    from pushtoknow.datasets.shards import write_run_pushes
+    from pushtoknow.inference.session import InferenceConfig, infer_object
+    from pushtoknow.models.checkpoint import load_checkpoint
+    from pushtoknow.pretrained import resolve_model_path
+    from pushtoknow.testbed.executor import SimulatedExecutor
+    from pushtoknow.testbed.objects import load_object_spec
+    from pushtoknow.viz import plot_estimates, save_push_strip
+
+    out_folder(out)
+    model = load_checkpoint(resolve_model_path(model_ref))
+    spec = load_object_spec(object_ref)
+    truth = spec.params.as_array()
+    show = Console(stderr=True) if as_json else console
+    sim_cfg = model.sim_config
+    cfg = InferenceConfig(
+        pushes=pushes,
+        policy=policy,
+        num_sigma_points=sigma_points,
+        profiles=model.profiles if profiles is None else profiles,
+    )
+    ex = SimulatedExecutor(spec, sim_cfg, seed=seed, recentre=True)
+    show.print(
+        f"[bold]{spec.name or 'object'}[/] ({spec.shape if isinstance(spec.shape, str) else ''})"
+        f", model {model.variant} ({model_ref}), policy {policy}, {pushes} pushes, seed {seed}"
+    )
+    try:
+
+        def on_push(e) -> None:
+            show.print(_estimate_table(e, truth, f"after push {e.index}"))
+
+        result = infer_object(
+            model,
+            ex,
+            cfg,
+            seed,
+            initial_pose=ex.initial_pose,
+            truth=truth,
+            object_name=spec.name or "",
+            on_push=on_push,
+        )
+    finally:
+        ex.close()
+    report = result.to_json()
+    if out is not None:
+        out.mkdir(parents=True, exist_ok=True)
+        plot_estimates(result, out / "estimates.png", title=f"{spec.name} · {model.variant}")
+        (out / "estimates.json").write_text(json.dumps(report, indent=1))
+        pushes_file = write_run_pushes(out, spec, result.records, sim_cfg.model_dump_json())
+        show.print(f"estimates plot → {out / 'estimates.png'}")
+        show.print(f"executed pushes → {pushes_file} (`pushtoknow identify --pushes {out}`)")
+        if strip:
+            save_push_strip(
+                result.records[0], model.camera, out / "push-1.png", title=f"{spec.name}, push 1"
+            )
+            show.print(f"frame strip → {out / 'push-1.png'}")
+    if as_json:
+        print(json.dumps(report))
+    return report
+
+
+@app.command()
+def infer(
+    model: str = typer.Option("pretrained", "--model", help="RUN directory or 'pretrained'"),
+    obj: str = typer.Option(..., "--object", help="catalogue:ID, a JSON/YAML file or JSON"),
+    pushes: int = typer.Option(5, "--pushes", min=1),
+    policy: PolicyChoice = policy_option(),
+    seed: int = seed_option(),
+    out: Path = typer.Option(Path("infer-out"), "--out", help="where the plot and JSON go"),
+    as_json: bool = typer.Option(False, "--json", help="print the estimates as JSON"),
+    sigma_points: int = sigma_points_option(help="default: the model's (100)"),
+    profiles: str = typer.Option(None, "--profiles", help=PROFILES_HELP),
+):
+    """Push an object K times on the testbed and estimate its parameters after every push."""
+    run_inference(
+        model,
+        obj,
+        pushes,
+        policy.value,
+        seed,
+        out,
+        as_json,
+        sigma_points=sigma_points,
+        profiles=None if profiles is None else parse_profiles(profiles),
+    )
+
+
+@app.command()
+def demo(
+    out: Path = typer.Option(Path("demo-out"), "--out"),
+    seed: int = seed_option(),
+    model: str = typer.Option("pretrained", "--model"),
+    pushes: int = typer.Option(5, "--pushes", min=1),
+):
+    """Offline demo: the shipped model estimates a held-out catalogue object (never trained
+    on) from 5 pushes; prints the tables, writes the plot and a strip of rendered frames."""
+    from pushtoknow.testbed.objects import demo_object_id
+
+    run_inference(
+        model, f"catalogue:{demo_object_id()}", pushes, "uniform", seed, out, False, strip=True
+    )
