@@ -151,10 +151,11 @@ def parse_profiles(text: str) -> tuple[str, ...]:
 
 def validation_summary(e: Exception) -> str | None:
     """'field: problem; …' for a settings validation error (pydantic), else None."""
-    errors = getattr(e, "errors", None)
-    if not callable(errors) or type(e).__name__ != "ValidationError":
+    from pydantic import ValidationError
+
+    if not isinstance(e, ValidationError):
         return None
-    return "; ".join(f"{'.'.join(map(str, d['loc'])) or '<root>'}: {d['msg']}" for d in errors())
+    return "; ".join(f"{'.'.join(map(str, d['loc'])) or '<root>'}: {d['msg']}" for d in e.errors())
 
 
 def fail(e: Exception) -> None:

@@ -13,7 +13,7 @@ finished shard is never half-written. Layout:
 Image datasets are chunked one frame per chunk and gzip-compressed. Integrity: every dataset
 carries HDF5's Fletcher-32 checksum (a corrupt chunk fails to read, naming the dataset), and
 `content_sha256` digests the objects' attributes and arrays (`content_digest`), so
-`verify_shard` (`dataset info --verify`, and resume before it skips a finished shard) finds
+`check_digest` (`dataset info --verify`, and resume before it skips a finished shard) finds
 corruption anywhere in them. Shards written without a digest are checked for readability only.
 """
 
@@ -162,13 +162,12 @@ def content_digest(path: Path, objects: h5py.Group) -> str:
     return h.hexdigest()
 
 
-def verify_shard(path: Path) -> bool:
-    """Read every array of a shard and compare its content digest. Returns True when the digest
-    matches, False when the shard has none (an older writer: only readability was checked);
-    raises DatasetError naming the shard when it is corrupt."""
-    with open_shard(path) as f:
-        digest = content_digest(path, f["objects"])
-        stored = f.attrs.get(DIGEST_ATTR)
+def check_digest(path: Path, f: h5py.File) -> bool:
+    """Compare the content digest of the open shard `f` (at `path`) with the one written with it.
+    Returns True when it matches, False when the shard has none (an older writer: only
+    readability was checked); raises DatasetError naming the shard when it is corrupt."""
+    digest = content_digest(path, f["objects"])
+    stored = f.attrs.get(DIGEST_ATTR)
     if stored is None:
         return False
     if str(stored) != digest:
@@ -182,7 +181,7 @@ def verify_shard(path: Path) -> bool:
 
 def shard_is_finished(path: Path, fingerprint: str) -> bool:
     """True if a complete, intact shard written with this fingerprint exists at `path`
-    (resume; its content is verified, `verify_shard`).
+    (resume; its content is verified, `check_digest`).
 
     Raises DatasetError naming the file if it is corrupt or was written with other settings.
     """
@@ -195,7 +194,7 @@ def shard_is_finished(path: Path, fingerprint: str) -> bool:
                 "written with other settings (objects, source files, seed or config differ); "
                 "use another --out directory",
             )
-    verify_shard(path)
+        check_digest(path, f)
     return True
 
 
@@ -261,18 +260,33 @@ def dataset_info(root: Path, verify: bool = False) -> dict:
     """Summary of a dataset directory: schema_version, testbed_version (the physics the pushes
     were simulated with, docs/PHYSICS.md), shards, objects, expected_objects and complete (from
     its GENERATION_FILE; None without one), pushes, steps, bytes; with `verify`, every shard's
-    content is checked first (`verify_shard`; DatasetError names the first corrupt one) and
-    verified_shards counts those with a matching digest (the others have none)."""
+    content is checked (`check_digest`; DatasetError names the first corrupt one), and its
+    fingerprint against the GENERATION_FILE's; verified_shards counts the shards with a matching
+    digest (the others have none)."""
     shards = list_shards(root)
     if not shards:
         raise DatasetError(root, f"no {SHARD_GLOB} files")
-    verified = sum(verify_shard(s) for s in shards) if verify else None
+    expected = record = None
+    gen_file = Path(root) / GENERATION_FILE
+    if gen_file.exists():
+        try:
+            record = json.loads(gen_file.read_text())
+            expected = int(record["config"]["objects"])
+        except (json.JSONDecodeError, KeyError, TypeError, ValueError):
+            raise DatasetError(gen_file, "unreadable provenance record") from None
+    verified = 0 if verify else None
     objects = pushes = steps = 0
     testbed_versions = set()
     profiles: dict[str, int] = {}
     image_shape = None
     for s in shards:
         with open_shard(s) as f:
+            if verify:
+                if record is not None and f.attrs.get("fingerprint") != record.get("fingerprint"):
+                    raise DatasetError(
+                        s, f"written with other settings than {GENERATION_FILE} records"
+                    )
+                verified += check_digest(s, f)
             testbed_versions.add(stored_sim_config(f.attrs["sim_config"]).testbed_version)
             for g in f["objects"].values():
                 objects += 1
@@ -282,21 +296,6 @@ def dataset_info(root: Path, verify: bool = False) -> dict:
                     prof = str(p.attrs["profile"])
                     profiles[prof] = profiles.get(prof, 0) + 1
                     image_shape = list(p["rgb"].shape[1:])
-    expected = None
-    gen_file = Path(root) / GENERATION_FILE
-    if gen_file.exists():
-        try:
-            record = json.loads(gen_file.read_text())
-            expected = int(record["config"]["objects"])
-        except (json.JSONDecodeError, KeyError, TypeError, ValueError):
-            raise DatasetError(gen_file, "unreadable provenance record") from None
-        if verify:
-            for s in shards:
-                with open_shard(s) as f:
-                    if f.attrs.get("fingerprint") != record.get("fingerprint"):
-                        raise DatasetError(
-                            s, f"written with other settings than {GENERATION_FILE} records"
-                        )
     return {
         "schema_version": SCHEMA_VERSION,
         "testbed_version": max(testbed_versions),
