@@ -84,6 +84,8 @@ CASES = [
     (["identify", "--pushes", "{tmp}", "--config", "{tmp}/unknown.yaml"], "huber_k"),
     (["simulate", "--objects", "1", "--out", "{tmp}/taken"], "file exists"),
     (["simulate", "--objects", "1", "--out", "/proc/no/such"], "no such file or directory"),
+    (["simulate", "--objects", "1", "--out", "{tmp}/r", "--ray", "127.0.0.1:1"], "no Ray cluster"),
+    (["evaluate-heldout", "--objects", "1", "--ray", "nowhere"], "expected auto, HOST:PORT"),
 ]
 
 

@@ -22,13 +22,20 @@ def test_physics_structured_model_trains_reloads_and_estimates(
     data = tiny_dataset(tmp_path_factory)
     models = {**TINY_TRAIN["models"], "structure": "physics", "quasi_static": quasi_static}
     raw = {**TINY_TRAIN, "models": models}
-    if quasi_static == "limit-surface":  # and a prior widened to cover the catalogue ranges
-        raw["prior_coverage"] = 0.9
+    if quasi_static == "limit-surface":  # with the free slide, a prior widened to cover the
+        raw["prior_coverage"] = 0.9  # catalogue ranges, and a dynamic-phase noise scale
+        models["free_slide"] = True
+        raw["sequence_calibration"] = {
+            **TINY_TRAIN["sequence_calibration"],
+            "dynamic_noise_scales": [0.5],
+        }
     trained = train_model(data, tmp_path, TrainConfig.model_validate(raw), seed=0, progress=False)
     model = load_checkpoint(tmp_path)
     assert model.models_config.structure == "physics"
     assert model.models_config.quasi_static == quasi_static
     assert (model.models.dynamics.limit_surface is not None) == (quasi_static == "limit-surface")
+    assert model.models.dynamics.free_slide == (quasi_static == "limit-surface")
+    assert model.inference == trained.inference  # the calibrated settings are saved
     assert isinstance(model.models.dynamics, PhysicsDynamics)
     assert isinstance(model.models.observation, PhysicsObservation)
     for a, b in zip(

@@ -4,9 +4,10 @@ import math
 
 import torch
 
+from pushtoknow.models.calibration import DIRECTIONS
 from pushtoknow.training.calibration import direction_nll, push_sequences
 from pushtoknow.training.data import load_push_tensors
-from tiny_training import DATA_OBJECTS, DATA_PUSHES, tiny_dataset
+from tiny_training import DATA_OBJECTS, DATA_PUSHES, SIGMA_POINTS, tiny_dataset, tiny_run
 
 
 def test_sequences_follow_each_objects_pushes_in_order(tmp_path_factory):
@@ -27,3 +28,32 @@ def test_direction_nll_is_the_gaussian_nll_in_the_basis():
     torch.testing.assert_close(nll, torch.full((1, 5), expected))
     worse = direction_nll(mean, cov, torch.ones(1, 5))
     assert (worse > nll).all()
+
+
+def test_dynamic_noise_scale_is_chosen_with_the_weights(tmp_path_factory):
+    from pushtoknow.models.checkpoint import load_checkpoint
+    from pushtoknow.training.calibration import SequenceCalibrationConfig, calibrate_evidence
+
+    model = load_checkpoint(tiny_run(tmp_path_factory)).eval()
+    pt = load_push_tensors(tiny_dataset(tmp_path_factory))
+    cfg = SequenceCalibrationConfig(
+        weights=(0.0, 1.0), dynamic_noise_scales=(0.25, 64.0), num_sigma_points=SIGMA_POINTS
+    )
+    rows: list[dict] = []
+    with torch.no_grad():
+        chosen = calibrate_evidence(model, pt, cfg, seed=0, log=rows.append)
+    assert len(rows) == 2 * 3  # weights × (the calibrated scale, 0.25, 64)
+    by_scale: dict = {}
+    for r in rows:
+        by_scale.setdefault(r["dynamic_noise_scale"], []).append(r)
+    # each candidate's score: the NLL of its best weight, summed over the directions
+    score = {
+        s: sum(min(r[f"nll_{d}"] for r in rs) for d in DIRECTIONS) for s, rs in by_scale.items()
+    }
+    best = min(score, key=score.get)
+    assert (chosen.dynamic_noise_scale or "") == best
+    assert chosen.noise_scale == model.inference.noise_scale
+    assert set(chosen.evidence_weights) <= {0.0, 1.0}
+    # the dynamic scale changes the posterior (release pushes have dynamic samples)
+    kept = [next(r for r in rs if r["weight"] == 1.0) for rs in by_scale.values()]
+    assert len({round(r["nll_log_mu_m"], 6) for r in kept}) == 3

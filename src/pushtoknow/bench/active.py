@@ -34,6 +34,7 @@ from pushtoknow.models.learned import (
     build_filter,
     with_pad_track,
 )
+from pushtoknow.models.physics import release_points
 from pushtoknow.testbed.config import PushConfig, TactileConfig
 from pushtoknow.testbed.push import PROFILES, Push, pad_positions
 
@@ -103,6 +104,7 @@ def context_builder_for(
             speed=speed,
             camera=camera,
             footprint=poly.expand(m, -1, -1),
+            release=release_points(pushes, push_cfg),
         )
         return with_pad_track(ctx, tracks, step + 1, 1.0 / rate_hz)
 

@@ -8,6 +8,7 @@ from pathlib import Path
 import typer
 
 from pushtoknow.cli.options import (
+    ray_option,
     seed_option,
     sigma_points_option,
 )
@@ -16,6 +17,7 @@ from pushtoknow.cli.shared import (
     fail,
     print_result,
 )
+from pushtoknow.common.errors import PushToKnowError
 
 
 @bench_app.command("sim")
@@ -88,3 +90,31 @@ def bench_active(
 
     res = run_active_bench(seed=seed, num_candidates=candidates, num_sigma_points=sigma_points)
     print_result(res, as_json, "active push decision")
+
+
+@bench_app.command("scaling")
+def bench_scaling(
+    objects: int = typer.Option(8, "--objects", min=1),
+    pushes: int = typer.Option(2, "--pushes", min=1),
+    workers: int = typer.Option(2, "--workers", min=2, help="compared with 1 worker"),
+    objects_per_shard: int = typer.Option(4, "--objects-per-shard", min=1),
+    ray: str = ray_option(),
+    seed: int = seed_option(),
+    as_json: bool = typer.Option(False, "--json"),
+    markdown: Path | None = typer.Option(None, "--markdown", help="write the table here"),
+):
+    """Throughput of `simulate` on 1 and --workers workers, on the local process pool and (with
+    --ray) on Ray, and whether every run wrote the same arrays."""
+    from pushtoknow.bench.scaling import run_scaling_bench, scaling_markdown
+
+    try:
+        report = run_scaling_bench(objects, pushes, workers, seed, objects_per_shard, ray)
+    except (PushToKnowError, ValueError) as e:
+        fail(e)
+    table = scaling_markdown(report)
+    if markdown is not None:
+        markdown.write_text(table)
+    if as_json:
+        print(json.dumps(report.to_dict()))
+    else:
+        print(table)

@@ -11,6 +11,7 @@ from rich.table import Table
 from pushtoknow.cli.options import (
     PolicyChoice,
     policy_option,
+    ray_option,
     seed_option,
     sigma_points_option,
 )
@@ -33,6 +34,7 @@ def simulate(
     pushes: int = typer.Option(2, "--pushes", min=1, help="pushes per object"),
     seed: int = seed_option(),
     workers: int = typer.Option(1, "--workers", min=1),
+    ray: str = ray_option(),
     objects_from: str = typer.Option(
         "catalogue",
         "--objects-from",
@@ -46,6 +48,7 @@ def simulate(
     config: Path | None = typer.Option(None, "--config", help="SimConfig YAML"),
 ):
     """Simulate pushes and write an HDF5 dataset (atomic shards, resumable)."""
+    from pushtoknow.common.parallel import make_runner
     from pushtoknow.datasets.generate import GenerationConfig, generate_dataset
     from pushtoknow.testbed.config import SimConfig
 
@@ -60,7 +63,8 @@ def simulate(
             objects_per_shard=objects_per_shard,
             sim=sim,
         )
-        res = generate_dataset(out, cfg, workers=workers)
+        with make_runner(workers, ray) as runner:
+            res = generate_dataset(out, cfg, workers=runner)
     except (PushToKnowError, ValueError) as e:
         fail(e)
     console.print(
@@ -163,30 +167,34 @@ def collect(
         0, "--first-object-index", min=0, help="skip this many objects of the seeded order"
     ),
     workers: int = typer.Option(1, "--workers", min=1),
+    ray: str = ray_option(),
     candidates: int = typer.Option(16, "--candidates", min=1),
     sigma_points: int = sigma_points_option(),
 ):
     """Collect training data with a push policy and a trained model (the filter runs, so active
     policies choose each push for the current belief); writes shards like `simulate`."""
     from pushtoknow.collection.collect import collect_dataset
+    from pushtoknow.common.parallel import make_runner
     from pushtoknow.pretrained import resolve_model_path
 
     if policy is None:
         raise typer.BadParameter("--policy is required")
     try:
-        res = collect_dataset(
-            out,
-            resolve_model_path(model),
-            policy.value,
-            objects_from,
-            objects,
-            pushes,
-            seed,
-            workers,
-            first_object_index,
-            candidates=candidates,
-            num_sigma_points=sigma_points,
-        )
+        model_path = resolve_model_path(model)
+        with make_runner(workers, ray) as runner:
+            res = collect_dataset(
+                out,
+                model_path,
+                policy.value,
+                objects_from,
+                objects,
+                pushes,
+                seed,
+                runner,
+                first_object_index,
+                candidates=candidates,
+                num_sigma_points=sigma_points,
+            )
     except (PushToKnowError, ValueError) as e:
         fail(e)
     console.print(

@@ -13,6 +13,7 @@ from pushtoknow.cli.options import (
     SEED_HELP,
     PolicyChoice,
     policy_option,
+    ray_option,
     seed_option,
 )
 from pushtoknow.cli.shared import (
@@ -39,6 +40,7 @@ def evaluate_heldout_cmd(
     policy: PolicyChoice = policy_option(),
     seed: int = seed_option(),
     workers: int = typer.Option(2, "--workers", min=1),
+    ray: str = ray_option(),
     out: Path = typer.Option(None, "--out", help="write the metrics JSON here"),
     as_json: bool = typer.Option(False, "--json"),
     profiles: str = typer.Option(None, "--profiles", help=PROFILES_HELP),
@@ -70,7 +72,9 @@ def evaluate_heldout_cmd(
         from pushtoknow.models.checkpoint import load_checkpoint
 
         profile_names = load_checkpoint(path).profiles
-    with Progress(console=err_console) as bar:
+    from pushtoknow.common.parallel import make_runner
+
+    with make_runner(workers, ray) as runner, Progress(console=err_console) as bar:
         task = bar.add_task("held-out objects", total=n)
         run = evaluate_heldout(
             path,
@@ -78,7 +82,7 @@ def evaluate_heldout_cmd(
             pushes,
             policy_name,
             seed,
-            workers,
+            runner,
             progress=lambda: bar.advance(task),
             profiles=profile_names,
         )
@@ -197,6 +201,7 @@ def evaluate_cmd(
     config: Path = typer.Option(None, "--config", help="YAML EvaluationConfig"),
     seed: int = seed_option(None, "default: the config's; " + SEED_HELP),
     workers: int = typer.Option(None, "--workers", min=1),
+    ray: str = ray_option(),
     append: list[Path] = typer.Option(
         [], "--append", help="markdown file appended to RESULTS.md (e.g. estimate-real's)"
     ),
@@ -224,14 +229,22 @@ def evaluate_cmd(
     refs = [r for m in models for r in m.split(",") if r]
     paths = [resolve_model_path(r) for r in refs]
     extra = [Path(a).read_text() for a in append]  # read first: fail before hours of work
-    with Progress(console=err_console) as bar:
+    from pushtoknow.common.parallel import make_runner
+
+    with make_runner(cfg.workers, ray) as runner, Progress(console=err_console) as bar:
 
         def progress(desc: str, total: int):
             task = bar.add_task(desc, total=total)
             return lambda: bar.advance(task)
 
         results = run_evaluation(
-            data, paths, cfg, out, progress=progress, echo=lambda m: err_console.print(m)
+            data,
+            paths,
+            cfg,
+            out,
+            progress=progress,
+            echo=lambda m: err_console.print(m),
+            runner=runner,
         )
     command = command_line(ctx)
     (out / "RESULTS.md").write_text(render_report(results, command, extra))

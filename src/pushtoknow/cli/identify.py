@@ -9,6 +9,7 @@ import typer
 from rich.table import Table
 
 from pushtoknow.cli.options import (
+    ray_option,
     seed_option,
 )
 from pushtoknow.cli.shared import (
@@ -67,6 +68,7 @@ def identify_cmd(
     max_pushes: int = typer.Option(None, "--max-pushes", min=1, help="use the first K pushes"),
     seed: int = seed_option(),
     workers: int = typer.Option(2, "--workers", min=1, help="processes for the rollouts"),
+    ray: str = ray_option(),
     config: Path = typer.Option(None, "--config", help="IdentifyConfig YAML"),
     as_json: bool = typer.Option(False, "--json", help="print the estimates as JSON"),
 ):
@@ -76,6 +78,7 @@ def identify_cmd(
     the directions the pushes do not reveal reported and kept at the prior's width."""
     from rich.progress import Progress
 
+    from pushtoknow.common.parallel import make_runner
     from pushtoknow.identification.config import IdentifyConfig
     from pushtoknow.identification.fit import identify
     from pushtoknow.identification.recordings import load_recorded_objects, replay_scene
@@ -90,7 +93,11 @@ def identify_cmd(
             if not objects:
                 raise IdentificationError(f"--object {object_index}: no such object in {pushes}")
         results = []
-        with RolloutPool(cfg.workers) as pool, Progress(console=err_console) as bar:
+        with (
+            make_runner(cfg.workers, ray) as runner,
+            RolloutPool(runner) as pool,
+            Progress(console=err_console) as bar,
+        ):
             for obj in objects:
                 scene = replay_scene(obj, shape, cfg.stop_at_rest)
                 records = obj.records[:max_pushes] if max_pushes else obj.records

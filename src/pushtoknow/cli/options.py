@@ -29,3 +29,15 @@ def policy_option(default: str | None = "uniform", help: str = "push policy"):
     """The `--policy` option of every command that pushes with a policy (choices from
     `inference.policies.POLICY_NAMES`)."""
     return typer.Option(None if default is None else PolicyChoice(default), "--policy", help=help)
+
+
+RAY_HELP = (
+    "run the work as Ray tasks: 'auto' starts a local Ray instance with --workers CPUs (or "
+    "joins the cluster in RAY_ADDRESS), ADDRESS joins a running cluster (ray://HEAD:10001 or "
+    "HEAD:6379); same results as the local pool; needs the pushtoknow[ray] extra"
+)
+
+
+def ray_option():
+    """The `--ray` option of every command that fans work out (`common.parallel`)."""
+    return typer.Option(None, "--ray", metavar="auto|ADDRESS", help=RAY_HELP)

@@ -37,6 +37,7 @@ from pydantic import Field
 
 from pushtoknow.common.config import Config
 from pushtoknow.common.errors import DatasetError
+from pushtoknow.common.parallel import Workers
 from pushtoknow.common.policies import POLICY_NAMES, PolicyName
 from pushtoknow.datasets.generate import (
     GENERATION_FILE,
@@ -184,7 +185,7 @@ def collect_dataset(
     objects: int = 4,
     pushes: int = 2,
     seed: int = 0,
-    workers: int = 1,
+    workers: Workers = 1,
     first_object_index: int = 0,
     *,
     objects_per_shard: int = 4,

@@ -72,3 +72,7 @@ class UntrainedProfileError(PushToKnowError, ValueError):
 class IdentificationError(PushToKnowError, ValueError):
     """Physics-based identification cannot run on the input it was given (no pushes, no
     footprint, a pusher track the simulator cannot replay); the message names the problem."""
+
+
+class ClusterError(PushToKnowError, RuntimeError):
+    """A Ray cluster is unavailable (Ray not installed, or the address unreachable)."""

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import multiprocessing as mp
 import os
 from pathlib import Path
 from typing import Literal
@@ -19,6 +18,7 @@ from pydantic import Field
 
 from pushtoknow.common.config import Config
 from pushtoknow.common.errors import DatasetError, ObjectSpecError
+from pushtoknow.common.parallel import Workers, runner_for
 from pushtoknow.datasets.shards import (
     GENERATION_FILE,
     SHARD_GLOB,
@@ -165,14 +165,15 @@ def write_pending_shards(
     fingerprint: str,
     cfg_json: str,
     make_shard,
-    workers: int,
+    workers: Workers,
     description: str,
     progress: bool = True,
     initializer=None,
 ) -> tuple[int, int]:
     """Write the shards of `plan` (object indices per shard) not yet finished, with
-    make_shard((out, shard index, indices, cfg_json)) → (shard index, objects), in a spawn pool
-    when workers > 1; a progress bar counts objects. Returns (written, skipped)."""
+    make_shard((out, shard index, indices, cfg_json)) → (shard index, objects), on `workers`
+    (a number of local processes, or a `TaskRunner`); a progress bar counts objects. Returns
+    (written, skipped)."""
     todo = [
         (str(out), i, idx, cfg_json)
         for i, idx in enumerate(plan)
@@ -182,25 +183,21 @@ def write_pending_shards(
 
     from pushtoknow.common.progress import progress_bar
 
-    with progress_bar(progress) as bar:
+    with progress_bar(progress) as bar, runner_for(workers) as runner:
         task = bar.add_task(
             f"{description} ({skipped} shards already done)", total=sum(len(t[2]) for t in todo)
         )
-        if workers <= 1 or len(todo) <= 1:
-            for t in todo:
-                bar.advance(task, make_shard(t)[1])
-        else:
-            ctx = mp.get_context("spawn")  # fresh GL contexts; no forked MuJoCo state
-            with ctx.Pool(min(workers, len(todo)), initializer=initializer) as pool:
-                for _, n in pool.imap_unordered(make_shard, todo):
-                    bar.advance(task, n)
+        runner.map(
+            make_shard, todo, on_done=lambda _, r: bar.advance(task, r[1]), initializer=initializer
+        )
     return len(todo), skipped
 
 
 def generate_dataset(
-    out: Path, cfg: GenerationConfig, workers: int = 1, progress: bool = True
+    out: Path, cfg: GenerationConfig, workers: Workers = 1, progress: bool = True
 ) -> dict:
-    """Generate (or resume) a dataset in `out`. Returns counts of written and skipped shards."""
+    """Generate (or resume) a dataset in `out` on `workers` (local processes or a
+    `TaskRunner`). Returns counts of written and skipped shards."""
     out = Path(out)
     select_objects(cfg.objects_from, cfg.objects, cfg.seed)  # validate early, in the parent
     prepare_dataset_dir(

@@ -7,12 +7,12 @@ parallel processes, each seeded by (seed, object id), so results do not depend o
 
 from __future__ import annotations
 
-import multiprocessing as mp
 from dataclasses import dataclass
 
 import numpy as np
 
 from pushtoknow.baselines.random_forest import features_from_records
+from pushtoknow.common.parallel import Workers, runner_for
 from pushtoknow.common.params import product_moments
 from pushtoknow.evaluation.metrics import coverage, nrmse, product_nrmse
 
@@ -127,30 +127,20 @@ def evaluate_heldout(
     pushes: int = 5,
     policy: str = "uniform",
     seed: int = 0,
-    workers: int = 1,
+    workers: Workers = 1,
     sigma_points: int | None = None,
     progress=None,
     profiles: tuple[str, ...] = ("constant",),
 ) -> HeldoutRun:
-    """Run inference on each object (`catalogue:ID` or spec strings); `profiles`: the speed
-    profiles the policy may use (`InferenceConfig.profiles`)."""
+    """Run inference on each object (`catalogue:ID` or spec strings) on `workers` (local
+    processes or a `TaskRunner`); `profiles`: the speed profiles the policy may use
+    (`InferenceConfig.profiles`)."""
     jobs = [
         (str(model_path), o, pushes, policy, seed * 100_003 + i, sigma_points, tuple(profiles))
         for i, o in enumerate(objects)
     ]
-    if workers <= 1:
-        out = []
-        for j in jobs:
-            out.append(_run_one(j))
-            if progress:
-                progress()
-    else:
-        with mp.get_context("spawn").Pool(workers) as pool:
-            out = []
-            for r in pool.imap(_run_one, jobs):
-                out.append(r)
-                if progress:
-                    progress()
+    with runner_for(workers) as runner:
+        out = runner.map(_run_one, jobs, on_done=(lambda *_: progress()) if progress else None)
     return HeldoutRun(
         mean=np.stack([r["mean"] for r in out]),
         std=np.stack([r["std"] for r in out]),

@@ -21,6 +21,7 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
+from pushtoknow.common.parallel import Workers
 from pushtoknow.common.params import PARAM_NAMES
 from pushtoknow.evaluation.metrics import coverage, nrmse, product_nrmse
 from pushtoknow.identification.config import IdentifyConfig
@@ -117,7 +118,9 @@ def run_identification_benchmark(
 ORACLE = "oracle"
 
 
-def oracle_run(base, objects: list[str], sim_config: SimConfig, seed: int, workers: int, progress):
+def oracle_run(
+    base, objects: list[str], sim_config: SimConfig, seed: int, workers: Workers, progress
+):
     """The `oracle` method of the evaluation suite: `identify` on the pushes the first model
     made (`base`: its HeldoutRun, with push tracks), the true footprint and the simulator's own
     physics. Returns a `suite.MethodRun` of two rows per object: the prior and the estimate
@@ -128,7 +131,7 @@ def oracle_run(base, objects: list[str], sim_config: SimConfig, seed: int, worke
     from pushtoknow.identification.prior import prior_moments
     from pushtoknow.testbed.objects import load_object_spec
 
-    cfg = IdentifyConfig(workers=workers)
+    cfg = IdentifyConfig()  # its rollouts run on `workers` (the pool below)
     sim = sim_config.model_copy(update={"render": False})
     z0, p0 = prior_moments()
     m0, s0 = si_moments(z0, p0)

@@ -41,6 +41,7 @@ from pydantic import Field
 
 from pushtoknow.baselines.random_forest import ForestBaseline, ForestConfig, features_from_dataset
 from pushtoknow.common.config import Config
+from pushtoknow.common.parallel import TaskRunner, Workers
 from pushtoknow.common.params import PARAM_NAMES
 from pushtoknow.common.policies import POLICY_NAMES
 from pushtoknow.evaluation.heldout import HeldoutRun, evaluate_heldout
@@ -267,6 +268,7 @@ def _inference_run(
     cache: Path,
     progress,
     need_tracks: bool = False,
+    workers: Workers = 1,
 ) -> HeldoutRun:
     """The model's run under `policy` on `objects`, from `cache` when it holds the same run (and
     its push tracks, when `need_tracks`: the oracle replays them)."""
@@ -280,7 +282,7 @@ def _inference_run(
         cfg.pushes,
         policy,
         cfg.seed,
-        cfg.workers,
+        workers,
         sigma_points=cfg.sigma_points,
         progress=progress,
         profiles=profiles,
@@ -332,10 +334,12 @@ def run_evaluation(
     out: Path,
     progress=None,
     echo=None,
+    runner: TaskRunner | None = None,
 ) -> dict:
     """Evaluate `models` (checkpoint paths; the first is the primary one) and the baselines on
     the held-out and novel sets; returns the results dict (also written to OUT/results.json).
-    progress(description, total) → advance callable; echo(str) for status lines."""
+    progress(description, total) → advance callable; echo(str) for status lines; runner: where
+    the objects run (default: `cfg.workers` local processes)."""
     from pushtoknow.models.checkpoint import load_checkpoint
 
     if not models:
@@ -346,6 +350,7 @@ def run_evaluation(
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     say = echo or (lambda _: None)
+    workers: Workers = runner if runner is not None else cfg.workers
     loaded = [load_checkpoint(m) for m in models]  # CheckpointError before any work
     names = _variant_names(loaded)
 
@@ -375,7 +380,15 @@ def run_evaluation(
                     i == 0 and policy == cfg.policies[0]
                 )  # the forest and oracle use its pushes
                 run = _inference_run(
-                    model, policy, objects, cfg, profiles, cache, adv, cfg.oracle and is_base
+                    model,
+                    policy,
+                    objects,
+                    cfg,
+                    profiles,
+                    cache,
+                    adv,
+                    cfg.oracle and is_base,
+                    workers,
                 )
                 methods[method] = MethodRun(
                     run.mean,
@@ -407,7 +420,7 @@ def run_evaluation(
             say(f"{set_name}: {ORACLE} (physics-based identification) on {n} objects")
             adv = progress(f"{set_name} {ORACLE}", n) if progress else None
             methods[ORACLE] = oracle_run(
-                base, objects, loaded[0].sim_config, cfg.seed, cfg.workers, adv
+                base, objects, loaded[0].sim_config, cfg.seed, workers, adv
             )
         results["sets"][set_name] = {
             "objects": base.ids,

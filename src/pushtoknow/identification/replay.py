@@ -17,8 +17,6 @@ missing). So the batch runs the testbed's own `PushSimulator` in a process pool,
 
 from __future__ import annotations
 
-import multiprocessing
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -26,6 +24,7 @@ from shapely.geometry import Point
 from shapely.ops import nearest_points
 
 from pushtoknow.common.errors import IdentificationError, PushToKnowError
+from pushtoknow.common.parallel import LocalRunner, TaskRunner, Workers
 from pushtoknow.common.params import ObjectParams
 from pushtoknow.testbed.config import SimConfig
 from pushtoknow.testbed.objects import COM_MARGIN, MAX_MASS, MIN_GYRATION_RADIUS, ObjectSpec
@@ -139,12 +138,14 @@ def _task(args) -> np.ndarray:
 
 
 class RolloutPool:
-    """Runs batches of (φ, push) replays on `workers` processes (1: in this process).
-    `rollouts` counts candidate φ replayed over all pushes, `push_rollouts` single pushes."""
+    """Runs batches of (φ, push) replays on `workers` (local processes, 1: in this process, or a
+    `TaskRunner`). `rollouts` counts candidate φ replayed over all pushes, `push_rollouts`
+    single pushes."""
 
-    def __init__(self, workers: int = 1):
-        self.workers = int(workers)
-        self._pool: ProcessPoolExecutor | None = None
+    def __init__(self, workers: Workers = 1):
+        self._owned = not isinstance(workers, TaskRunner)
+        self.runner = workers if isinstance(workers, TaskRunner) else LocalRunner(workers)
+        self.workers = self.runner.workers
         self.rollouts = 0
         self.push_rollouts = 0
 
@@ -155,9 +156,8 @@ class RolloutPool:
         self.close()
 
     def close(self) -> None:
-        if self._pool is not None:
-            self._pool.shutdown()
-            self._pool = None
+        if self._owned:
+            self.runner.close()
 
     def run(
         self, scene: ReplayScene, phis: np.ndarray, tracks: list[PushTrack]
@@ -166,14 +166,7 @@ class RolloutPool:
         push (see `simulate_track`)."""
         phis = np.atleast_2d(np.asarray(phis, dtype=np.float64))
         tasks = [(scene, phi, tr) for phi in phis for tr in tracks]
-        if self.workers <= 1:
-            out = [_task(t) for t in tasks]
-        else:
-            if self._pool is None:
-                self._pool = ProcessPoolExecutor(
-                    self.workers, mp_context=multiprocessing.get_context("spawn")
-                )
-            out = list(self._pool.map(_task, tasks, chunksize=1))
+        out = self.runner.map(_task, tasks)
         self.rollouts += len(phis)
         self.push_rollouts += len(tasks)
         k = len(tracks)

@@ -97,12 +97,16 @@ def _first_rows(index: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
 class InferenceSettings(Config):
     """How the trained filter runs at inference (calibrated on validation pushes after
     training). update_every: apply the measurement update at every n-th 10 Hz sample only
-    (prediction runs at every sample); noise_scale: factor on the learned R;
+    (prediction runs at every sample); noise_scale: factor on the learned R
+    (dynamic_noise_scale: on the samples of a push's dynamic phase, None: the same);
     evidence_weights: the share of each push's evidence the parameter belief keeps, per
     direction of `models.calibration.DIRECTIONS` (1: the filter's posterior as it is)."""
 
     update_every: int = Field(1, ge=1)
     noise_scale: float = Field(1.0, gt=0)
+    dynamic_noise_scale: float | None = Field(
+        None, gt=0, description="factor on R in a push's dynamic phase; None: noise_scale"
+    )
     num_sigma_points: int = Field(100, ge=10)
     evidence_weights: tuple[float, float, float, float, float] = (1.0, 1.0, 1.0, 1.0, 1.0)
 
@@ -152,15 +156,23 @@ class TrainedModel:
         return self.variant == "v-ddf"
 
     def build_filter(
-        self, num_sigma_points: int | None = None, noise_scale: float | None = None
+        self,
+        num_sigma_points: int | None = None,
+        noise_scale: float | None = None,
+        dynamic_noise_scale: float | None = None,
     ) -> BeliefFilter:
-        """The variant's filter on these networks, R scaled by `noise_scale` (default: the
-        calibrated `inference.noise_scale`), with `num_sigma_points` (default: inference's)."""
+        """The variant's filter on these networks, R scaled by `noise_scale` and
+        `dynamic_noise_scale` (defaults: the calibrated `inference` ones; a `noise_scale`
+        given alone scales every sample), with `num_sigma_points` (default: inference's)."""
         c = num_sigma_points or self.inference.num_sigma_points
         cfg = self.filter_config.model_copy(update={"num_sigma_points": c})
-        scale = self.inference.noise_scale if noise_scale is None else noise_scale
+        if noise_scale is None:
+            scale = self.inference.noise_scale
+            dynamic = self.inference.dynamic_noise_scale
+        else:
+            scale, dynamic = noise_scale, dynamic_noise_scale
         m = self.models
-        noise = ScaledObservationNoise(m.observation_noise, scale)
+        noise = ScaledObservationNoise(m.observation_noise, scale, dynamic)
         models = LearnedModels(m.dynamics, m.observation, noise)
         return build_filter(FILTER_KIND[self.variant], models, filter_config=cfg)
 

@@ -63,6 +63,7 @@ POSE_DIM = 3
 NUM_POSE_FEATURES = 12  # (x - x0)/L, (y - y0)/L, sin, cos, δx/L, δy/L, δθ, pad (5)
 SPEED_SCALE = 0.1  # m/s, normalises the push speed feature
 PAD_RADIUS = 0.005  # m: the testbed's pad (kept equal to `PadConfig.radius` by a test)
+STEADY_ACCEL = 0.05  # m/s²: pad accelerations below this are a steady push (tracking noise)
 
 
 FilterKind = Literal["dual", "joint", "vision_only"]
@@ -91,7 +92,11 @@ class PushContext:
     frame), used by `ComInFootprintConstraint`; pad_window (B, 4, 2) or None: the pad's
     positions at samples t-2, t-1, t, t+1 around the step that ends at t (m, world; the
     robot's kinematics, see `with_pad_track`), step_dt the time between samples (s): the
-    physics-structured models read the pad's velocity and acceleration from them.
+    physics-structured models read the pad's velocity and acceleration from them;
+    release (B, 3) or None: when each push's pad starts to stop, its speed then and its
+    deceleration (`testbed.push.release_point`; t_r = inf for a push that never stops), and
+    time (B,) or None: the time of sample t since the push began (s), for the free slide of
+    a released object (`models.physics.free_slide_gap`).
     """
 
     mask0: torch.Tensor
@@ -103,6 +108,8 @@ class PushContext:
     footprint: torch.Tensor | None = None
     pad_window: torch.Tensor | None = None
     step_dt: float = 0.1
+    release: torch.Tensor | None = None
+    time: torch.Tensor | None = None
     _cache: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     def action_map(self, config: ActionMapConfig, dtype: torch.dtype) -> torch.Tensor:
@@ -139,6 +146,10 @@ class PushContext:
             expect_shape(self.footprint, "context.footprint", [("B", batch), ("V", None), ("2", 2)])
         if self.pad_window is not None:
             expect_shape(self.pad_window, "context.pad_window", [("B", batch), ("4", 4), ("2", 2)])
+        if self.release is not None:
+            expect_shape(self.release, "context.release", [("B", batch), ("3", 3)])
+        if self.time is not None:
+            expect_shape(self.time, "context.time", [("B", batch)])
 
     def pad_kinematics(self) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """The pad's velocity over the step (B, 2) (m/s, backward difference t-1 → t) and its
@@ -150,6 +161,12 @@ class PushContext:
         accel = (w[:, 3] - 2 * w[:, 2] + w[:, 1]) / dt**2
         accel_prev = (w[:, 2] - 2 * w[:, 1] + w[:, 0]) / dt**2
         return velocity, accel, accel_prev
+
+    def pad_accelerating(self) -> torch.Tensor:
+        """(B,) bool: the pad's acceleration at t or t-1 exceeds `STEADY_ACCEL` (the step is
+        part of a push's dynamic phase)."""
+        _, accel, accel_prev = self.pad_kinematics()
+        return (accel.norm(dim=-1) > STEADY_ACCEL) | (accel_prev.norm(dim=-1) > STEADY_ACCEL)
 
     def to(self, dtype: torch.dtype | None = None, device: torch.device | str | None = None):
         """A copy with every tensor moved to dtype/device."""
@@ -167,6 +184,8 @@ class PushContext:
             mv(self.footprint),
             mv(self.pad_window),
             self.step_dt,
+            mv(self.release),
+            mv(self.time),
         )
 
 
@@ -190,7 +209,8 @@ def with_pad_track(
     context: PushContext, paths: torch.Tensor, t: torch.Tensor | int, step_dt: float
 ) -> PushContext:
     """`context` for the step that ends at sample t of pad paths (B, T, 2) (m, world): the pad
-    at its position at t, and its window for the pad's velocity and acceleration."""
+    at its position at t, its window for the pad's velocity and acceleration, and the time
+    t · step_dt."""
     b = paths.shape[0]
     t_b = torch.as_tensor(t, device=paths.device).long().expand(b)
     return dataclasses.replace(
@@ -198,6 +218,7 @@ def with_pad_track(
         contact_xy=paths[torch.arange(b, device=paths.device), t_b],
         pad_window=pad_windows(paths, t_b),
         step_dt=float(step_dt),
+        time=t_b.to(paths.dtype) * float(step_dt),
     )
 
 
@@ -293,6 +314,8 @@ def _repeat_context(context: PushContext, times: int) -> PushContext:
         rep(context.footprint),
         rep(context.pad_window),
         context.step_dt,
+        rep(context.release),
+        rep(context.time),
     )
 
 
@@ -414,18 +437,30 @@ class ScaledObservationNoise(ObservationNoiseModel):
     """R = scale · R_base(z): the observation noise of a trained model inflated by a factor
     calibrated on validation data. 60 updates per push treat model errors that persist over
     the push as independent; inflating R (`training.pipeline` calibrates it) keeps the
-    parameter belief from becoming overconfident."""
+    parameter belief from becoming overconfident. The few samples of a push's dynamic phase
+    (`PushContext.pad_accelerating`), whose errors persist far less, may take their own
+    `dynamic_scale` (None: `scale`)."""
 
-    def __init__(self, base: ObservationNoiseModel, scale: float):
+    def __init__(
+        self, base: ObservationNoiseModel, scale: float, dynamic_scale: float | None = None
+    ):
         super().__init__()
-        if not scale > 0:
-            raise ValueError(f"noise scale must be positive, got {scale}")
+        for name, v in (("noise scale", scale), ("dynamic noise scale", dynamic_scale)):
+            if v is not None and not v > 0:
+                raise ValueError(f"{name} must be positive, got {v}")
         self.base = base
         self.scale = float(scale)
+        self.dynamic_scale = None if dynamic_scale is None else float(dynamic_scale)
         self.obs_dim = base.obs_dim
 
     def forward(self, observation: torch.Tensor, context: PushContext) -> torch.Tensor:
-        return self.scale * self.base(observation, context)
+        r = self.base(observation, context)
+        if self.dynamic_scale is None or self.dynamic_scale == self.scale:
+            return self.scale * r
+        if context.pad_window is None:
+            raise ShapeError("a dynamic noise scale needs the pad's track (with_pad_track)")
+        dynamic = context.pad_accelerating().unsqueeze(-1)
+        return torch.where(dynamic, self.dynamic_scale, self.scale).to(r) * r
 
 
 # --------------------------------------------------------------------------------------------
@@ -452,14 +487,20 @@ class LearnedModelsConfig(Config):
     tac: TacNetConfig = TacNetConfig()
     obs_noise: ObsNoiseNetConfig = ObsNoiseNetConfig()
     include_contact: bool = False
+    free_slide: bool = Field(
+        False,
+        description="physics structure only: a released object's slide at μ g ahead of the "
+        "stopping pad is written down (`models.physics.free_slide_gap`)",
+    )
 
     @property
     def label(self) -> str:
         """The structure as reports name it: "black-box", "physics" or
-        "physics-limit-surface"."""
-        if self.quasi_static == "network":
-            return self.structure
-        return f"{self.structure}-{self.quasi_static}"
+        "physics-limit-surface", with "-free-slide" when the free slide is written down."""
+        label: str = self.structure
+        if self.quasi_static != "network":
+            label = f"{label}-{self.quasi_static}"
+        return f"{label}-free-slide" if self.free_slide else label
 
     @model_validator(mode="after")
     def _consistent(self) -> LearnedModelsConfig:
@@ -472,6 +513,8 @@ class LearnedModelsConfig(Config):
         crop = self.encoding.crop_size
         if self.quasi_static != "network" and self.structure != "physics":
             raise ValueError("quasi_static: limit-surface needs structure: physics")
+        if self.free_slide and self.structure != "physics":
+            raise ValueError("free_slide needs structure: physics")
         if crop is not None and crop != self.encoder.image_size:
             raise ValueError(f"encoder.image_size must equal encoding.crop_size={crop}")
         return self
@@ -536,7 +579,7 @@ def _physics_models(
     if config.quasi_static == "limit-surface":
         limit_surface = physics.LimitSurface(config.pad_radius)
     return LearnedModels(
-        physics.PhysicsDynamics(encoding, process, limit_surface),
+        physics.PhysicsDynamics(encoding, process, limit_surface, config.free_slide),
         physics.PhysicsObservation(encoding, tac),
         LearnedObservationNoise(ObsNoiseNet(config.obs_noise)),
     )

@@ -32,6 +32,7 @@ kinematics from `PushContext.pad_kinematics`:
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import torch
@@ -44,18 +45,20 @@ from pushtoknow.models.contact import LimitSurfacePush, limit_surface_push, radi
 from pushtoknow.models.learned import (
     POSE_DIM,
     SPEED_SCALE,
+    STEADY_ACCEL,
     PushContext,
     ShapeActionEncoding,
     sigma_point_features,
 )
 from pushtoknow.models.networks import PhysicsProcessNet, PhysicsTacNet
+from pushtoknow.testbed.config import PushConfig
+from pushtoknow.testbed.push import Push, release_point
 
 ACCEL_SCALE = 1.0  # m/s², normalises the pad's acceleration features
 GATE_ACCEL = 0.5  # m/s²: scale of the gate of the dynamic motion term (below)
 CONTACT_REACH = 1e-3  # m: a pad this close to the outline seen in S_0 counts as touching
 CONTACT_SOFTNESS = 5e-4  # m: width of that decision (a 64 px mask is ~1 mm off)
 MOMENT_ARM_RATIO = 0.9  # initial ℓ / radius of gyration (a disc's ℓ is 0.94 of it)
-STEADY_ACCEL = 0.05  # m/s²: pad accelerations below this are a steady push (tracking noise)
 GEOM_DIM = 19
 DYN_DIM = GEOM_DIM + 5
 INERTIAL_DIM = GEOM_DIM + 1
@@ -152,6 +155,37 @@ def physics_features(
     )
 
 
+def release_points(pushes: Sequence[Push], cfg: PushConfig) -> torch.Tensor:
+    """(B, 3) `testbed.push.release_point` of each push: `PushContext.release`."""
+    return torch.tensor([release_point(p, cfg) for p in pushes], dtype=torch.float32)
+
+
+def _travel(speed: torch.Tensor, decel: torch.Tensor, elapsed: torch.Tensor) -> torch.Tensor:
+    """Distance covered `elapsed` (≥ 0) s after leaving at `speed` while decelerating at `decel`
+    until at rest (m)."""
+    t = torch.minimum(elapsed, speed / decel)
+    return speed * t - 0.5 * decel * t.square()
+
+
+def free_slide_gap(
+    time: torch.Tensor, release: torch.Tensor, friction: torch.Tensor
+) -> torch.Tensor:
+    """How far a released object has slid ahead of the pad at `time` (m), (B, S).
+
+    time (B,): s since the push began; release (B, 3): (t_r, v_r, D) (`release_points`);
+    friction (B, S): μ of each sigma point. Until t_r the pad carries the object. From t_r the
+    pad stops at D while the object, left at v_r, slides at μ g (Coulomb, a translating slider):
+    gap = max(0, x_object − x_pad) with x = v_r τ − a τ²/2 up to rest, τ = time − t_r. Zero for a
+    push that never stops (t_r = inf) and for μ g ≥ D (the object stays on the pad).
+    """
+    t_r, v_r, decel = (release[:, i : i + 1] for i in range(3))
+    elapsed = (time[:, None] - t_r).clamp_min(0.0)  # (B, 1); inf - inf never: t_r = inf → 0
+    elapsed = torch.where(torch.isfinite(t_r), elapsed, torch.zeros_like(elapsed))
+    slide = _travel(v_r, (friction * GRAVITY).clamp_min(1e-6), elapsed)
+    pad = _travel(v_r, decel.clamp_min(1e-6), elapsed)
+    return torch.relu(slide - pad)
+
+
 class LimitSurface(nn.Module):
     """Quasi-static pushing of the outline in `context.footprint` (`models.contact`) with a
     learned moment arm ℓ = κ · radius of gyration; pad_radius (m)."""
@@ -193,11 +227,13 @@ class PhysicsDynamics(DynamicsModel):
         encoding: ShapeActionEncoding,
         process_net: PhysicsProcessNet,
         limit_surface: LimitSurface | None = None,
+        free_slide: bool = False,
     ):
         super().__init__()
         self.encoding = encoding
         self.process_net = process_net
         self.limit_surface = limit_surface
+        self.free_slide = free_slide
 
     def forward(
         self, states: torch.Tensor, context: PushContext
@@ -207,7 +243,22 @@ class PhysicsDynamics(DynamicsModel):
         delta, q = self.process_net(f.geom, f.dyn, f.gate, enc)
         if self.limit_surface is not None:
             delta = delta + self.limit_surface(states[..., :POSE_DIM], f.com, context).twist
+        if self.free_slide:
+            delta = delta + self.slide_step(context, f.friction)
         return delta, q
+
+    @staticmethod
+    def slide_step(context: PushContext, friction: torch.Tensor) -> torch.Tensor:
+        """(B, S, 3): how far a released object slides ahead of the pad over the step that ends
+        at `context.time`, along the push direction (`free_slide_gap`)."""
+        if context.release is None or context.time is None:
+            raise ShapeError("free-slide models need the pushes' release points and the time")
+        release, time = context.release.to(friction.dtype), context.time.to(friction.dtype)
+        step = free_slide_gap(time, release, friction) - free_slide_gap(
+            time - context.step_dt, release, friction
+        )
+        d = context.direction.to(friction.dtype)[:, None]
+        return torch.stack([step * d.cos(), step * d.sin(), torch.zeros_like(step)], dim=-1)
 
 
 class PhysicsObservation(ObservationModel):

@@ -86,6 +86,27 @@ class Push:
         return cls((float(a[0]), float(a[1])), float(a[2]), PROFILES[int(a[4])], float(a[3]))
 
 
+def speed_profile(push: Push, cfg: PushConfig) -> SpeedProfile:
+    """The pad's speed profile of `push` under the testbed's push settings."""
+    if push.profile == "constant":
+        return constant_profile(push.speed, cfg.horizon)
+    if push.profile == "release":
+        return release_profile(push.speed, cfg.release_accel, cfg.release_decel, cfg.horizon)
+    raise ValueError(f"unknown speed profile {push.profile!r}; use 'constant' or 'release'")
+
+
+def release_point(push: Push, cfg: PushConfig) -> tuple[float, float, float]:
+    """(t_r (s), v_r (m/s), D (m/s²)): when the pad starts to stop, its speed then and its
+    deceleration; a pushed object with μ·g < D leaves the pad at t_r with speed v_r and slides
+    freely (docs/DESIGN.md §10). A push that never stops gives (inf, 0, 0)."""
+    profile = speed_profile(push, cfg)
+    ts, vs = profile.times, profile.speeds
+    for i in range(len(ts) - 1):
+        if vs[i + 1] < vs[i]:
+            return ts[i], vs[i], (vs[i] - vs[i + 1]) / (ts[i + 1] - ts[i])
+    return math.inf, 0.0, 0.0
+
+
 def pad_positions(
     push: Push,
     times: np.ndarray,
@@ -108,12 +129,7 @@ def pad_positions(
     object's boundary and pd is the inward normal there (or the line misses the object).
     pad_radius: m, default `PadConfig().radius`.
     """
-    if push.profile == "constant":
-        profile = constant_profile(push.speed, cfg.horizon)
-    elif push.profile == "release":
-        profile = release_profile(push.speed, cfg.release_accel, cfg.release_decel, cfg.horizon)
-    else:
-        raise ValueError(f"unknown speed profile {push.profile!r}; use 'constant' or 'release'")
+    profile = speed_profile(push, cfg)
     u = push.unit
     if start is None:
         radius = PadConfig().radius if pad_radius is None else pad_radius

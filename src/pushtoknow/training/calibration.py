@@ -4,8 +4,11 @@ The filter runs each validation object's recorded pushes in order, its parameter
 carried from push to push as at inference (`models.calibration.keep_evidence` after each push;
 every push starts at its recorded pose). For each candidate weight the negative log-likelihood
 of the true parameters is measured in each direction of `models.calibration.DIRECTIONS` after
-every push; each direction takes the weight with the lowest mean NLL over all pushes. The
-choice is made on validation objects only (never on the evaluation's held-out ones).
+every push; each direction takes the weight with the lowest mean NLL over all pushes. With
+`dynamic_noise_scales`, the R scale on the samples of a push's dynamic phase
+(`InferenceSettings.dynamic_noise_scale`) is chosen with them: the candidate whose best weights
+give the lowest NLL summed over the directions. The choice is made on validation objects only
+(never on the evaluation's held-out ones).
 """
 
 from __future__ import annotations
@@ -24,6 +27,9 @@ from pushtoknow.training.end_to_end import run_window
 
 class SequenceCalibrationConfig(Config):
     weights: tuple[float, ...] = (0.0, 0.1, 0.25, 0.5, 1.0)
+    dynamic_noise_scales: tuple[float, ...] = Field(
+        (), description="candidate R scales for dynamic samples; empty: R's calibrated scale"
+    )
     max_objects: int = Field(40, ge=2, description="validation objects used")
     num_sigma_points: int = Field(32, ge=10)
     init_pose_std: tuple[float, float, float] = (1e-3, 1e-3, 0.01)
@@ -52,7 +58,9 @@ def run_sequences(
 ) -> list[tuple[torch.Tensor, torch.Tensor]]:
     """Parameter beliefs (mean (N, K), cov (N, K, K)) after each push of each sequence."""
     gen = torch.Generator().manual_seed(seed)
-    filt = model.build_filter(cfg.num_sigma_points, noise_scale=settings.noise_scale)
+    filt = model.build_filter(
+        cfg.num_sigma_points, settings.noise_scale, settings.dynamic_noise_scale
+    )
     n, p = seqs.shape
     k = model.prior.mean.shape[0]
     mean_par = model.prior.mean.expand(n, k).clone()
@@ -93,22 +101,37 @@ def calibrate_evidence(
     progress=None,
 ) -> InferenceSettings:
     """`model.inference` with `evidence_weights` chosen per direction (see module doc)."""
-    settings = model.inference
     seqs = push_sequences(val, cfg.max_objects)
     truth = val.params_norm[seqs[:, 0]].float()
-    task = progress.add_task("sequence calibration", total=len(cfg.weights)) if progress else None
-    nll = []
-    for w in cfg.weights:
-        beliefs = run_sequences(model, val, seqs, torch.full((5,), float(w)), settings, cfg, seed)
-        per_push = torch.stack([direction_nll(m, c, truth).mean(0) for m, c in beliefs])
-        nll.append(per_push.mean(0))  # (K,) mean over pushes and objects
-        if log:
-            log(
-                {"weight": w, "pushes": seqs.shape[1], "objects": seqs.shape[0]}
-                | {f"nll_{d}": float(v) for d, v in zip(DIRECTIONS, nll[-1], strict=True)}
-            )
-        if progress:
-            progress.advance(task)
-    best = torch.stack(nll).argmin(0)
-    chosen = tuple(float(cfg.weights[i]) for i in best.tolist())
-    return settings.model_copy(update={"evidence_weights": chosen})
+    candidates = [model.inference] + [
+        model.inference.model_copy(update={"dynamic_noise_scale": float(d)})
+        for d in cfg.dynamic_noise_scales
+    ]
+    total = len(cfg.weights) * len(candidates)
+    task = progress.add_task("sequence calibration", total=total) if progress else None
+    best_total, best = math.inf, model.inference
+    for settings in candidates:
+        nll = []
+        for w in cfg.weights:
+            weights = torch.full((5,), float(w))
+            beliefs = run_sequences(model, val, seqs, weights, settings, cfg, seed)
+            per_push = torch.stack([direction_nll(m, c, truth).mean(0) for m, c in beliefs])
+            nll.append(per_push.mean(0))  # (K,) mean over pushes and objects
+            if log:
+                log(
+                    {
+                        "dynamic_noise_scale": settings.dynamic_noise_scale or "",
+                        "weight": w,
+                        "pushes": seqs.shape[1],
+                        "objects": seqs.shape[0],
+                    }
+                    | {f"nll_{d}": float(v) for d, v in zip(DIRECTIONS, nll[-1], strict=True)}
+                )
+            if progress:
+                progress.advance(task)
+        lowest, index = torch.stack(nll).min(0)
+        if float(lowest.sum()) < best_total:
+            best_total = float(lowest.sum())
+            chosen = tuple(float(cfg.weights[i]) for i in index.tolist())
+            best = settings.model_copy(update={"evidence_weights": chosen})
+    return best

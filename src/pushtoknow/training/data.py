@@ -19,6 +19,7 @@ from pushtoknow.common.params import normalise_params
 from pushtoknow.datasets.shards import list_shards, open_shard
 from pushtoknow.perception.footprint import footprint_from_mask
 from pushtoknow.testbed.config import SimConfig, stored_sim_config
+from pushtoknow.testbed.push import Push, release_point
 
 
 @dataclass
@@ -27,7 +28,8 @@ class PushTensors:
 
     mask0 (N, 1, H, W) · pose (N, T, 3) true · tactile (N, T, 3) · force_clean (N, T, 2)
     pusher (N, T, 2) · action (N, 5) · params (N, 5) SI (float64) · params_norm (N, 5)
-    footprint (N, V, 2) from S_0 · object_index (N,) int64
+    footprint (N, V, 2) from S_0 · release (N, 3) each push's `testbed.push.release_point`
+    · object_index (N,) int64
     push_index (N,) int64 (order within its object) · vision_pose (N, T, 3) or None
     step_dt: time between samples (s)
     """
@@ -41,6 +43,7 @@ class PushTensors:
     params: torch.Tensor
     params_norm: torch.Tensor
     footprint: torch.Tensor
+    release: torch.Tensor
     object_index: torch.Tensor
     push_index: torch.Tensor
     camera: CameraModel
@@ -122,8 +125,10 @@ def load_push_tensors(root: Path, max_objects: int | None = None) -> PushTensors
         for k in ("mask0", "pose", "tactile", "force_clean", "pusher", "action", "footprint")
     }
     params = torch.as_tensor(np.stack(cols["params"]), dtype=torch.float64)
+    release = [release_point(Push.from_array(a), sim_config.push) for a in cols["action"]]
     return PushTensors(
         **f32,
+        release=torch.tensor(release, dtype=torch.float32),
         params=params,
         params_norm=normalise_params(params).float(),
         object_index=torch.as_tensor(cols["object_index"]),

@@ -49,6 +49,7 @@ def push_context(pt: PushTensors, push: torch.Tensor, t: torch.Tensor) -> PushCo
         speed=pt.action[push, 3],
         camera=pt.camera,
         footprint=pt.footprint[push],
+        release=pt.release[push],
     )
     return with_pad_track(ctx, paths, t, pt.step_dt)
 

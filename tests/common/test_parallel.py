@@ -1,0 +1,131 @@
+"""Task runners: a local process pool and Ray give the same results in job order; a Ray task
+whose worker dies is retried; a tiny `simulate` and a tiny `evaluate-heldout` on Ray match the
+local run exactly (docs/DESIGN.md §13)."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pushtoknow.bench.scaling import arrays_digest
+from pushtoknow.common.errors import ClusterError
+from pushtoknow.common.parallel import LocalRunner, RayRunner, check_reachable, runner_for
+
+ray = pytest.importorskip("ray")
+
+
+def _square(x: int) -> tuple[int, int]:
+    return x * x, os.getpid()
+
+
+def _die_once(job: tuple[str, int]) -> int:
+    """Kills its worker process the first time it runs for a marker file; returns the value
+    on the retry."""
+    marker, value = job
+    if not os.path.exists(marker):
+        Path(marker).write_text("died once")
+        os._exit(1)
+    return value
+
+
+def _fail(x: int) -> int:
+    raise ValueError(f"job {x} is bad")
+
+
+@pytest.fixture(scope="module")
+def ray_runner():
+    """A local Ray instance of 2 CPUs whose workers can import this module's tasks."""
+    old = os.environ.get("PYTHONPATH")
+    here = str(Path(__file__).parent)
+    os.environ["PYTHONPATH"] = here if not old else f"{here}{os.pathsep}{old}"
+    try:
+        with RayRunner("auto", workers=2) as runner:
+            yield runner
+    finally:
+        if old is None:
+            del os.environ["PYTHONPATH"]
+        else:
+            os.environ["PYTHONPATH"] = old
+
+
+def test_local_runner_keeps_job_order_and_reports_each_job():
+    done: list[int] = []
+    with LocalRunner(2) as runner:
+        out = runner.map(_square, list(range(7)), on_done=lambda i, _: done.append(i))
+        assert runner.map(_square, [3])[0][0] == 9  # reusable; one job runs in this process
+    assert [r[0] for r in out] == [i * i for i in range(7)]
+    assert sorted(done) == list(range(7))
+    with runner_for(1) as serial:
+        assert [r[0] for r in serial.map(_square, [1, 2])] == [1, 4]
+        assert {r[1] for r in serial.map(_square, [1, 2])} == {os.getpid()}
+
+
+def test_runner_for_leaves_a_given_runner_open():
+    with LocalRunner(2) as runner:
+        with runner_for(runner) as same:
+            assert same is runner
+        assert [r[0] for r in runner.map(_square, [2, 3])] == [4, 9]
+
+
+def test_ray_runner_keeps_job_order_and_reports_each_job(ray_runner):
+    done: list[int] = []
+    out = ray_runner.map(_square, list(range(7)), on_done=lambda i, _: done.append(i))
+    assert [r[0] for r in out] == [i * i for i in range(7)]
+    assert sorted(done) == list(range(7))
+    assert ray_runner.workers == 2
+
+
+def test_ray_retries_a_task_whose_worker_died(ray_runner, tmp_path):
+    jobs = [(str(tmp_path / f"marker-{i}"), i) for i in range(3)]
+    assert ray_runner.map(_die_once, jobs) == [0, 1, 2]
+    assert all((tmp_path / f"marker-{i}").exists() for i in range(3))
+
+
+def test_a_failing_task_raises_its_error(ray_runner):
+    with pytest.raises(Exception, match="job 1 is bad"):
+        ray_runner.map(_fail, [1])
+
+
+def test_unreachable_or_malformed_addresses_are_one_line_errors():
+    with pytest.raises(ClusterError, match="no Ray cluster answers"):
+        check_reachable("127.0.0.1:1")
+    with pytest.raises(ClusterError, match="expected auto, HOST:PORT"):
+        check_reachable("somewhere")
+
+
+@pytest.mark.slow
+def test_simulate_on_ray_writes_the_local_runs_arrays(ray_runner, tmp_path):
+    from pushtoknow.datasets.generate import GenerationConfig, generate_dataset
+    from pushtoknow.testbed.config import PushConfig, SimConfig
+
+    cfg = GenerationConfig(
+        objects=3,
+        pushes=1,
+        seed=5,
+        objects_per_shard=1,
+        profiles=("constant", "release"),
+        sim=SimConfig(push=PushConfig(horizon=1.0)),
+    )
+    generate_dataset(tmp_path / "local", cfg, workers=1, progress=False)
+    generate_dataset(tmp_path / "ray", cfg, workers=ray_runner, progress=False)
+    assert len(list((tmp_path / "ray").glob("shard-*.h5"))) == 3
+    assert arrays_digest(tmp_path / "local") == arrays_digest(tmp_path / "ray")
+    other = cfg.model_copy(update={"seed": 6})  # the digest does see the pushes
+    generate_dataset(tmp_path / "other", other, workers=1, progress=False)
+    assert arrays_digest(tmp_path / "other") != arrays_digest(tmp_path / "local")
+
+
+@pytest.mark.slow
+def test_evaluate_heldout_on_ray_gives_the_local_numbers(ray_runner, tmp_path_factory):
+    from pushtoknow.evaluation.heldout import evaluate_heldout, heldout_object_ids
+    from tiny_training import tiny_run
+
+    run_dir = tiny_run(tmp_path_factory)
+    ids = heldout_object_ids(2, seed=1)
+    local = evaluate_heldout(run_dir, ids, pushes=1, seed=1, workers=1)
+    on_ray = evaluate_heldout(run_dir, ids, pushes=1, seed=1, workers=ray_runner)
+    for name in ("mean", "std", "zscore", "push_tracks"):
+        np.testing.assert_array_equal(getattr(local, name), getattr(on_ray, name))
