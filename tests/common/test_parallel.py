@@ -129,3 +129,43 @@ def test_evaluate_heldout_on_ray_gives_the_local_numbers(ray_runner, tmp_path_fa
     on_ray = evaluate_heldout(run_dir, ids, pushes=1, seed=1, workers=ray_runner)
     for name in ("mean", "std", "zscore", "push_tracks"):
         np.testing.assert_array_equal(getattr(local, name), getattr(on_ray, name))
+
+
+def test_identification_rollouts_on_ray_equal_the_local_ones(ray_runner):
+    from pushtoknow.identification.fit import tracks_from_records
+    from pushtoknow.identification.replay import ReplayScene, RolloutPool
+    from pushtoknow.identification.synthetic import simulate_pushes
+    from pushtoknow.testbed.config import SimConfig
+    from pushtoknow.testbed.objects import load_object_spec, resolve_shape
+
+    sim = SimConfig(render=False).model_copy(
+        update={"push": SimConfig().push.model_copy(update={"horizon": 2.0})}
+    )
+    spec = load_object_spec("catalogue:117")
+    records = simulate_pushes(spec, ["constant", "release"], seed=2, config=sim)
+    tracks = tracks_from_records(records, sim)
+    scene = ReplayScene(resolve_shape(spec.shape), spec.height, sim)
+    phis = np.stack([spec.params.as_array(), spec.params.as_array() * [1.2, 0.9, 1, 1, 1.1]])
+    with RolloutPool(1) as local:
+        expected = local.run(scene, phis, tracks)
+    with RolloutPool(ray_runner) as pool:
+        got = pool.run(scene, phis, tracks)
+        assert pool.push_rollouts == 4
+    for a, b in zip(expected, got):
+        for x, y in zip(a, b):
+            np.testing.assert_array_equal(x, y)
+
+
+@pytest.mark.slow
+def test_evaluate_on_ray_gives_the_local_numbers(ray_runner, tmp_path_factory, tmp_path):
+    from pushtoknow.evaluation.suite import EvaluationConfig, run_evaluation
+    from tiny_training import tiny_dataset, tiny_run
+
+    data, run_dir = tiny_dataset(tmp_path_factory), tiny_run(tmp_path_factory)
+    ci = Path(__file__).parents[2] / "configs" / "evaluate-ci.yaml"
+    cfg = EvaluationConfig.from_yaml(ci).model_copy(update={"novel_objects": 0})
+    local = run_evaluation(data, [run_dir], cfg, tmp_path / "local")
+    on_ray = run_evaluation(data, [run_dir], cfg, tmp_path / "ray", runner=ray_runner)
+    a, b = local["sets"]["heldout"]["methods"], on_ray["sets"]["heldout"]["methods"]
+    diff = {(m, k) for m in a for k in a[m] if a[m][k] != b[m][k] and k != "seconds_per_object"}
+    assert not diff, diff  # every number but the wall time
