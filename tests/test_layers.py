@@ -22,6 +22,7 @@ RANKS = {
     "identification": 6.5,  # simulator-in-the-loop fit: common, geometry, testbed, datasets
     "inference": 7,
     "collection": 7.5,  # runs inference to collect training data, trains models
+    "reporting": 7.8,  # units, tables, markdown, figures: renders results, imports no producer
     "evaluation": 8,
     "bench": 9,
     "viz": 9,

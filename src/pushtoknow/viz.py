@@ -71,9 +71,9 @@ def save_push_strip(rec, camera, path: Path, title: str = "") -> None:
 def plot_estimates(result, path: Path, title: str = "") -> None:
     """The paper's Fig. 5 for one inference run (`InferenceResult`): each parameter's mean with
     ±1σ and ±2σ bands versus push number (0 = the prior), the truth as a dashed line when known.
-    Drawn by `evaluation.figures.plot_estimates_vs_push`."""
+    Drawn by `reporting.figures.plot_estimates_vs_push`."""
     from pushtoknow.common.params import PARAM_NAMES
-    from pushtoknow.evaluation.figures import plot_estimates_vs_push
+    from pushtoknow.reporting.figures import plot_estimates_vs_push
 
     rows = [result.prior, *result.estimates]
     plot_estimates_vs_push(

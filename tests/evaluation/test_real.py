@@ -21,8 +21,8 @@ from pushtoknow.evaluation.real import (
     estimate_real_object,
     friction_reference,
     load_real_object,
-    markdown_table,
 )
+from pushtoknow.reporting.real import markdown_table
 from pushtoknow.testbed.push import Push
 from pushtoknow.testbed.sim import PushRecord
 from tiny_training import SIGMA_POINTS, tiny_dataset, tiny_run

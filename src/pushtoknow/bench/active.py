@@ -34,9 +34,8 @@ from pushtoknow.models.learned import (
     build_filter,
     with_pad_track,
 )
-from pushtoknow.models.physics import release_points
 from pushtoknow.testbed.config import PushConfig, TactileConfig
-from pushtoknow.testbed.push import PROFILES, Push, pad_positions
+from pushtoknow.testbed.push import PROFILES, Push, pad_positions, release_points
 
 DISC_RADIUS_M = 0.04
 FOOTPRINT_VERTICES = 24
@@ -104,7 +103,7 @@ def context_builder_for(
             speed=speed,
             camera=camera,
             footprint=poly.expand(m, -1, -1),
-            release=release_points(pushes, push_cfg),
+            release=torch.as_tensor(release_points(pushes, push_cfg), dtype=torch.float32),
         )
         return with_pad_track(ctx, tracks, step + 1, 1.0 / rate_hz)
 

@@ -13,6 +13,7 @@ import h5py
 
 from pushtoknow.bench import machine_description
 from pushtoknow.common.parallel import LocalRunner, RayRunner, TaskRunner
+from pushtoknow.reporting.tables import markdown_table
 
 
 @dataclass(frozen=True)
@@ -119,14 +120,21 @@ def scaling_markdown(report: ScalingReport) -> str:
         f"({report.objects_per_shard} objects per shard, seed {report.seed}); "
         f"machine: {report.machine}.",
         "",
-        "| backend | workers | start (s) | simulation (s) | objects/s | speed-up |",
-        "|---|---|---|---|---|---|",
     ]
+    rows = []
     for r in report.runs:
         base = next(x for x in report.runs if x.backend == r.backend and x.workers == 1)
-        lines.append(
-            f"| {r.backend} | {r.workers} | {r.start_s:.1f} | {r.seconds:.1f} | "
-            f"{r.objects_per_s:.3f} | {r.objects_per_s / base.objects_per_s:.2f}× |"
+        rows.append(
+            [
+                r.backend,
+                str(r.workers),
+                f"{r.start_s:.1f}",
+                f"{r.seconds:.1f}",
+                f"{r.objects_per_s:.3f}",
+                f"{r.objects_per_s / base.objects_per_s:.2f}×",
+            ]
         )
+    header = ["backend", "workers", "start (s)", "simulation (s)", "objects/s", "speed-up"]
+    lines += markdown_table(header, rows)
     lines += ["", f"Same arrays in every run: {'yes' if report.identical else 'NO'}."]
     return "\n".join(lines) + "\n"

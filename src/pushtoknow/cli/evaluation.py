@@ -108,7 +108,7 @@ def evaluate_heldout_cmd(
         }
     )
     if markdown is not None:
-        from pushtoknow.evaluation.report import heldout_markdown
+        from pushtoknow.reporting.results import heldout_markdown
 
         markdown.write_text(heldout_markdown(metrics, command_line(ctx)) + "\n")
     if save_and_print_json(metrics, out, as_json):
@@ -218,9 +218,9 @@ def evaluate_cmd(
 
     from rich.progress import Progress
 
-    from pushtoknow.evaluation.report import render_report
     from pushtoknow.evaluation.suite import EvaluationConfig, run_evaluation
     from pushtoknow.pretrained import resolve_model_path
+    from pushtoknow.reporting.results import render_report
 
     cfg = EvaluationConfig.from_yaml(config) if config else EvaluationConfig()
     overrides = {"folds": folds, "seed": seed, "workers": workers, "oracle": oracle}
@@ -251,7 +251,7 @@ def evaluate_cmd(
     if as_json:
         print(json.dumps({k: results[k] for k in ("methods", "primary", "config")}))
         return
-    from pushtoknow.evaluation.report import COLUMNS
+    from pushtoknow.reporting.results import COLUMNS
 
     for set_name, s in results["sets"].items():
         t = Table(title=f"NRMSE after {cfg.pushes} pushes, {set_name} ({len(s['objects'])})")
@@ -279,7 +279,7 @@ def ablate_efficiency(
     """Learning efficiency (paper Fig. 4b): validation loss versus training pushes for data
     collected with each policy, over seeds; writes efficiency.json/.csv/.png."""
     from pushtoknow.collection.efficiency import EfficiencyConfig, figure_series, run_efficiency
-    from pushtoknow.evaluation.figures import plot_learning_efficiency
+    from pushtoknow.reporting.figures import plot_learning_efficiency
 
     try:
         cfg = EfficiencyConfig.from_yaml(config)
@@ -302,7 +302,7 @@ def ablate_efficiency(
             title=f"learning efficiency ({len(cfg.seeds)} seeds, mean ± std)",
         )
     if markdown is not None:
-        from pushtoknow.evaluation.report import efficiency_markdown
+        from pushtoknow.reporting.results import efficiency_markdown
 
         markdown.write_text(efficiency_markdown(results, command_line(ctx)) + "\n")
     if as_json:

@@ -167,7 +167,7 @@ def identify_bench_cmd(
             objects, pushes, names, seed, cfg, progress=lambda _: bar.advance(task)
         )
     if markdown is not None:
-        from pushtoknow.evaluation.report import identification_markdown
+        from pushtoknow.reporting.results import identification_markdown
 
         markdown.write_text(identification_markdown([res], [command_line(ctx)]) + "\n")
     if save_and_print_json(res, out, as_json):

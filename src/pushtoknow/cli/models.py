@@ -130,15 +130,9 @@ def train(
     )
 
 
-def _format_estimate(mean: float, std: float, name: str) -> str:
-    from pushtoknow.common.params import DISPLAY_UNITS
-
-    scale, unit = DISPLAY_UNITS[name]
-    return f"{mean * scale:.3g} ± {std * scale:.2g} {unit}".strip()
-
-
 def _estimate_table(estimate, truth, title: str) -> Table:
-    from pushtoknow.common.params import DISPLAY_UNITS, PARAM_NAMES
+    from pushtoknow.common.params import PARAM_NAMES
+    from pushtoknow.reporting.units import DISPLAY_UNITS, format_estimate
 
     t = Table(title=title, title_justify="left")
     t.add_column("parameter")
@@ -153,7 +147,7 @@ def _estimate_table(estimate, truth, title: str) -> Table:
         scale, unit = DISPLAY_UNITS[name]
         row = [
             name,
-            _format_estimate(estimate.mean[j], estimate.std[j], name),
+            format_estimate(estimate.mean[j], estimate.std[j], name),
             f"{lo[j] * scale:.3g} – {hi[j] * scale:.3g}",
         ]
         if truth is not None:

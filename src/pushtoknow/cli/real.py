@@ -57,8 +57,9 @@ def estimate_real(
     random forest, physics-based identification, prior mean) and compare with its known mass,
     I_z, CoM and a friction measured on its pure translations. Raw MIT Push files are
     converted first, time-rescaled to the model's training speed unless --no-rescale."""
-    from pushtoknow.evaluation.real import error_rows, estimate_real_object, markdown_table
+    from pushtoknow.evaluation.real import estimate_real_object
     from pushtoknow.pretrained import resolve_model_path
+    from pushtoknow.reporting.real import error_rows, markdown_table
 
     try:
         report = estimate_real_object(
@@ -93,7 +94,7 @@ def estimate_real(
 
 
 def _print_report(report: dict, error_rows, model_ref: str) -> None:
-    from pushtoknow.evaluation.real import table_rows
+    from pushtoknow.reporting.real import table_rows
 
     header, rows = table_rows(report)
     t = Table(

@@ -403,7 +403,7 @@ def _run(cfg: EfficiencyConfig, out: Path, seed: int, workers, log) -> dict:
 
 
 def figure_series(results: dict, key: str = "nll") -> dict[str, list[tuple[float, float, float]]]:
-    """{policy: [(pushes, mean, std)]} for `evaluation.figures.plot_learning_efficiency`;
+    """{policy: [(pushes, mean, std)]} for `reporting.figures.plot_learning_efficiency`;
     key "nll" (val_nll) or "rmse" (val_rmse)."""
     m, s = ("mean", "std") if key == "nll" else ("rmse_mean", "rmse_std")
     return {

@@ -20,17 +20,6 @@ PARAM_UNITS: dict[str, str] = {
 }
 POSE_NAMES: tuple[str, ...] = ("x", "y", "theta")
 
-# How parameters are shown to people: name → (factor from SI, unit). The CoM in mm and I_z in
-# g·m², as the paper does; files and JSON stay SI.
-DISPLAY_UNITS: dict[str, tuple[float, str]] = {
-    "mass": (1.0, "kg"),
-    "friction": (1.0, ""),
-    "com_x": (1e3, "mm"),
-    "com_y": (1e3, "mm"),
-    "inertia": (1e3, "g·m²"),
-    "mu_m": (1.0, "kg"),
-}
-
 # Paper Table I grid (SI). I_z in kg·m² (the paper prints g·m²).
 CATALOGUE_GRID: dict[str, tuple[float, ...]] = {
     "mass": (0.2, 0.5, 0.8, 1.2),

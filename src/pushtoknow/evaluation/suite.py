@@ -477,7 +477,7 @@ def write_figures(
     """Fig. 5 (estimates vs push number, first held-out object, primary method), Fig. 4a
     (learning curves of the models' end-to-end validation), NRMSE vs pushes per method, and the
     calibration plot of the primary method. Returns {figure: path}."""
-    from pushtoknow.evaluation import figures as F
+    from pushtoknow.reporting import figures as F
 
     out.mkdir(parents=True, exist_ok=True)
     held = runs["heldout"]

@@ -44,12 +44,11 @@ from pushtoknow.inference.policies import (
 from pushtoknow.models.calibration import keep_evidence
 from pushtoknow.models.checkpoint import TrainedModel
 from pushtoknow.models.learned import PushContext, with_pad_track
-from pushtoknow.models.physics import release_points
 from pushtoknow.perception.footprint import footprint_from_mask
 from pushtoknow.perception.visnet import frames_as_tensors, visnet_measure
 from pushtoknow.testbed.config import SimConfig
 from pushtoknow.testbed.executor import PushExecutor, View
-from pushtoknow.testbed.push import PROFILES, ProfileName, Push
+from pushtoknow.testbed.push import PROFILES, ProfileName, Push, release_points
 from pushtoknow.testbed.sim import PushRecord
 
 
@@ -237,7 +236,9 @@ class ObjectEstimator:
             speed=torch.tensor([p.speed for p in pushes], dtype=torch.float32),
             camera=self.camera,
             footprint=fp[None].expand(b, -1, -1),
-            release=release_points(pushes, self.model.sim_config.push),
+            release=torch.as_tensor(
+                release_points(pushes, self.model.sim_config.push), dtype=torch.float32
+            ),
         )
 
     def estimate(self, index: int, push: Push | None = None) -> PushEstimate:

@@ -32,7 +32,6 @@ kinematics from `PushContext.pad_kinematics`:
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
 from dataclasses import dataclass
 
 import torch
@@ -51,8 +50,6 @@ from pushtoknow.models.learned import (
     sigma_point_features,
 )
 from pushtoknow.models.networks import PhysicsProcessNet, PhysicsTacNet
-from pushtoknow.testbed.config import PushConfig
-from pushtoknow.testbed.push import Push, release_point
 
 ACCEL_SCALE = 1.0  # m/s², normalises the pad's acceleration features
 GATE_ACCEL = 0.5  # m/s²: scale of the gate of the dynamic motion term (below)
@@ -155,11 +152,6 @@ def physics_features(
     )
 
 
-def release_points(pushes: Sequence[Push], cfg: PushConfig) -> torch.Tensor:
-    """(B, 3) `testbed.push.release_point` of each push: `PushContext.release`."""
-    return torch.tensor([release_point(p, cfg) for p in pushes], dtype=torch.float32)
-
-
 def _travel(speed: torch.Tensor, decel: torch.Tensor, elapsed: torch.Tensor) -> torch.Tensor:
     """Distance covered `elapsed` (≥ 0) s after leaving at `speed` while decelerating at `decel`
     until at rest (m)."""
@@ -172,7 +164,8 @@ def free_slide_gap(
 ) -> torch.Tensor:
     """How far a released object has slid ahead of the pad at `time` (m), (B, S).
 
-    time (B,): s since the push began; release (B, 3): (t_r, v_r, D) (`release_points`);
+    time (B,): s since the push began; release (B, 3): (t_r, v_r, D)
+    (`testbed.push.release_points`);
     friction (B, S): μ of each sigma point. Until t_r the pad carries the object. From t_r the
     pad stops at D while the object, left at v_r, slides at μ g (Coulomb, a translating slider):
     gap = max(0, x_object − x_pad) with x = v_r τ − a τ²/2 up to rest, τ = time − t_r. Zero for a

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Literal
 
@@ -105,6 +106,11 @@ def release_point(push: Push, cfg: PushConfig) -> tuple[float, float, float]:
         if vs[i + 1] < vs[i]:
             return ts[i], vs[i], (vs[i] - vs[i + 1]) / (ts[i + 1] - ts[i])
     return math.inf, 0.0, 0.0
+
+
+def release_points(pushes: Sequence[Push], cfg: PushConfig) -> np.ndarray:
+    """(B, 3) `release_point` of each push (the learned models' `PushContext.release`)."""
+    return np.array([release_point(p, cfg) for p in pushes], dtype=np.float64).reshape(-1, 3)
 
 
 def pad_positions(

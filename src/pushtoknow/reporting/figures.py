@@ -24,7 +24,8 @@ from matplotlib.figure import Figure
 from matplotlib.patches import Patch
 from scipy.stats import norm
 
-from pushtoknow.common.params import DISPLAY_UNITS, PARAM_NAMES, PARAM_RANGES
+from pushtoknow.common.params import PARAM_NAMES, PARAM_RANGES
+from pushtoknow.reporting.units import DISPLAY_UNITS
 
 AXIS_NAMES = {"mass": "mass m", "friction": "friction μ", "com_x": "c_x", "com_y": "c_y",
               "inertia": "I_z"}  # fmt: skip

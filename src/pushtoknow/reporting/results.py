@@ -9,6 +9,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from pushtoknow.common.params import PARAM_NAMES
+from pushtoknow.reporting.tables import markdown_table
 
 # The paper's Sim-Robotac NRMSE (Table III).
 PAPER_NRMSE = {
@@ -40,52 +41,45 @@ def method_table(methods: dict, order: list[str] | None = None) -> str:
     """Markdown table: NRMSE per parameter and overall (mean ± std over folds), μ·m, coverage,
     impossible estimates (of all N·(K+1)), share of release pushes chosen, seconds per
     object."""
-    lines = [
-        "| method | "
-        + " | ".join(HEADERS)
-        + " | μ·m | cov 68% | cov 90% | impossible | release pushes | s/object |",
-        "|---" * (len(HEADERS) + 7) + "|",
-    ]
+    header = ["method", *HEADERS, "μ·m", "cov 68%", "cov 90%", "impossible", "release pushes"]
+    rows = []
     for name in order or list(methods):
         m = methods[name]
-        cells = [_cell(m["nrmse"][k], m["nrmse_std"][k]) for k in COLUMNS]
         sec = m.get("seconds_per_object")
         bad = m.get("impossible_estimates")
-        bad = "" if bad is None else f"{bad}/{m['estimates']}"
         share = m.get("profile_share")
-        release = "" if not share else f"{share.get('release', 0.0):.0%}"
-        lines.append(
-            f"| {name} | "
-            + " | ".join(cells)
-            + f" | {_cell(m['mu_m'], m['mu_m_std'])} | {m['coverage68']:.2f} | "
-            + f"{m['coverage90']:.2f} | {bad} | {release} | {'' if sec is None else f'{sec:.1f}'} |"
+        rows.append(
+            [
+                name,
+                *(_cell(m["nrmse"][k], m["nrmse_std"][k]) for k in COLUMNS),
+                _cell(m["mu_m"], m["mu_m_std"]),
+                f"{m['coverage68']:.2f}",
+                f"{m['coverage90']:.2f}",
+                "" if bad is None else f"{bad}/{m['estimates']}",
+                "" if not share else f"{share.get('release', 0.0):.0%}",
+                "" if sec is None else f"{sec:.1f}",
+            ]
         )
-    return "\n".join(lines)
+    return "\n".join(markdown_table([*header, "s/object"], rows))
 
 
 def paper_table() -> str:
-    lines = ["| source | " + " | ".join(HEADERS) + " |", "|---" * (len(HEADERS) + 1) + "|"]
-    for name, row in PAPER_NRMSE.items():
-        lines.append(
-            f"| {name} | "
-            + " | ".join(f"{row[k]:.2f}" if k in row else "–" for k in COLUMNS)
-            + " |"
-        )
-    return "\n".join(lines)
+    rows = [
+        [name, *(f"{row[k]:.2f}" if k in row else "–" for k in COLUMNS)]
+        for name, row in PAPER_NRMSE.items()
+    ]
+    return "\n".join(markdown_table(["source", *HEADERS], rows))
 
 
 def per_push_table(methods: dict, param: str) -> str:
     """NRMSE of `param` after k = 0..K pushes (all objects), one row per method."""
     k = len(next(iter(methods.values()))["per_push"])
-    lines = [
-        "| method | " + " | ".join(f"k={j}" for j in range(k)) + " |",
-        "|---" * (k + 1) + "|",
+    rows = [
+        [name, *(f"{r[param]:.3f}" for r in m["per_push"])]
+        for name, m in methods.items()
+        if len(m["per_push"]) == k  # not e.g. the oracle: final estimate only
     ]
-    for name, m in methods.items():
-        if len(m["per_push"]) != k:  # e.g. the oracle: final estimate only
-            continue
-        lines.append(f"| {name} | " + " | ".join(f"{r[param]:.3f}" for r in m["per_push"]) + " |")
-    return "\n".join(lines)
+    return "\n".join(markdown_table(["method", *(f"k={j}" for j in range(k))], rows))
 
 
 def interpretation(methods: dict, primary: str, novel: dict | None = None) -> str:

@@ -7,7 +7,8 @@ import pytest
 from scipy.stats import norm
 
 from pushtoknow.common.params import PARAM_NAMES
-from pushtoknow.evaluation.figures import (
+from pushtoknow.evaluation.metrics import coverage, gaussian_zscores
+from pushtoknow.reporting.figures import (
     CALIBRATION_LEVELS,
     calibration_coverage,
     plot_calibration,
@@ -17,7 +18,6 @@ from pushtoknow.evaluation.figures import (
     plot_nrmse_vs_pushes,
     read_curve,
 )
-from pushtoknow.evaluation.metrics import coverage, gaussian_zscores
 
 DPI = 50  # small PNGs: fast to write and read back
 

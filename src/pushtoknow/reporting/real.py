@@ -1,0 +1,100 @@
+"""Tables of a real-data report (`evaluation.real.estimate_real_object`): the estimates after
+each push beside the truth, the normalised errors, and the notes, as markdown."""
+
+from __future__ import annotations
+
+import math
+
+from pushtoknow.common.params import PARAM_NAMES
+from pushtoknow.reporting.tables import markdown_table as md
+from pushtoknow.reporting.units import format_value as _fmt
+from pushtoknow.reporting.units import labelled
+
+
+def table_rows(report: dict) -> tuple[list[str], list[list[str]]]:
+    """Header and rows (strings) of the estimates table: parameter (unit), truth, filter prior,
+    filter after each push (mean ± std), forest after the last push, physics-based
+    identification from all pushes (when it ran), prior mean."""
+    n = len(report["filter"]["per_push"])
+    header = ["parameter", "truth", "filter prior"]
+    header += [f"filter after push {k + 1}" for k in range(n)]
+    header.append(f"forest ({n} pushes)")
+    ident = report.get("identify")
+    if ident is not None:
+        header.append(f"identify ({n} pushes)")
+    header.append("prior mean")
+    rows = []
+    for p in PARAM_NAMES:
+        fp = report["filter"]["prior"][p]
+        row = [labelled(p), _fmt(report["truth"][p], p)]
+        row.append(_fmt(fp["mean"], p, fp["std"]))
+        for e in report["filter"]["per_push"]:
+            row.append(_fmt(e[p]["mean"], p, e[p]["std"]))
+        f = report["forest"]["per_push"][-1][p]
+        row.append(_fmt(f["mean"], p, f["std"]))
+        if ident is not None:
+            i = ident["per_push"][-1][p]
+            row.append(_fmt(i["mean"], p, i["std"]))
+        row.append(_fmt(report["prior_mean"][p], p))
+        rows.append(row)
+    mm = report["mu_m"]
+    row = ["μ·m (kg)", _fmt(mm["truth"], "mu_m")]
+    row.append(_fmt(mm["filter_prior"]["mean"], "mu_m", mm["filter_prior"]["std"]))
+    row += [_fmt(e["mean"], "mu_m", e["std"]) for e in mm["filter"]]
+    row.append(_fmt(mm["forest"][-1], "mu_m"))
+    if ident is not None:
+        row.append(_fmt(mm["identify"][-1]["mean"], "mu_m", mm["identify"][-1]["std"]))
+    row.append(_fmt(mm["prior_mean"], "mu_m"))
+    rows.append(row)
+    return header, rows
+
+
+def error_rows(report: dict) -> tuple[list[str], list[list[str]]]:
+    """Header and rows of the normalised errors |estimate − truth| / catalogue range."""
+    header = ["predictor", *PARAM_NAMES, "overall", "μ·m"]
+    er, mm = report["errors"], report["mu_m"]["errors"]
+
+    def fmt(d: dict, prod) -> list[str]:
+        cells = [("—" if d[k] is None else f"{d[k]:.3f}") for k in (*PARAM_NAMES, "overall")]
+        return [*cells, "—" if prod is None else f"{prod:.3f}"]
+
+    n = len(er["filter"])
+    rows = [["prior mean", *fmt(er["prior_mean"], mm["prior_mean"])]]
+    rows += [[f"filter, push {k + 1}", *fmt(er["filter"][k], mm["filter"][k])] for k in range(n)]
+    rows += [[f"forest, push {k + 1}", *fmt(er["forest"][k], mm["forest"][k])] for k in range(n)]
+    if "identify" in er:
+        rows += [
+            [f"identify, push {k + 1}", *fmt(er["identify"][k], mm["identify"][k])]
+            for k in range(n)
+        ]
+    return header, rows
+
+
+def markdown_table(report: dict, title: str | None = None) -> str:
+    """The estimates and error tables of a report as GitHub markdown, with the notes."""
+    lines = [f"### {title}", ""] if title else []
+    lines += md(*table_rows(report))
+    lines += ["", "Normalised error |estimate − truth| / (catalogue max − min):", ""]
+    lines += md(*error_rows(report))
+    lines += [""]
+    push_lines = [
+        f"- push {k + 1}: `{p['file']}`, {p['samples']} samples at {p['speed_m_per_s']} m/s "
+        f"(time scale {p['time_scale']:g}), moved {p['displacement_m'] * 100:.1f} cm, "
+        f"turned {p['rotation_deg']:+.1f}°{' (pure translation)' if p['pure_translation'] else ''}"
+        f"; filter pose error at the end {p['filter_pose_error_end']['xy_mm']:.1f} mm / "
+        f"{p['filter_pose_error_end']['theta_deg']:.1f}°"
+        for k, p in enumerate(report["pushes"])
+    ]
+    ident = report.get("identify")
+    if ident is not None:
+        last = ident["per_push"][-1]
+        noise = ident["noise_std"]
+        push_lines.append(
+            f"- identify: {ident['model']}; replayed at {ident['rate_hz']:g} Hz (the recorded "
+            f"clock); noise from the misfit: force {noise['force_N']:.2f} N, position "
+            f"{noise['position_m'] * 1e3:.1f} mm, angle {math.degrees(noise['angle_rad']):.1f}°; "
+            f"not identified (prior width kept): {', '.join(last['unidentified']) or 'none'}; "
+            f"{last['rollouts']} rollouts in {last['seconds']:.0f} s"
+        )
+    lines += push_lines + [""] + [f"- {n}" for n in report["notes"]] + [""]
+    return "\n".join(lines)
