@@ -672,3 +672,12 @@ def test_real_subset_selection(mit_sample_dir):
     assert len(list(iter_mit_push(mit_sample_dir, shape="rect1", acceleration=0, speed=0.1))) == 3
     assert find_mit_push_files(mit_sample_dir, speed=0.02) == []
     assert find_mit_push_files(mit_sample_dir, surface="abs") == []
+
+
+def test_contact_phase_keeps_the_bounces_inside_it():
+    from pushtoknow.datasets.mit_push import contact_phase_force
+
+    force = np.array([[0.0, 0], [3.0, 4], [0.2, 0], [6.0, 8], [0.0, 0]])  # a bounce at sample 2
+    contact = np.array([False, True, False, True, False])
+    np.testing.assert_allclose(contact_phase_force(force, contact), [5.0, 0.2, 10.0])
+    assert contact_phase_force(force, np.zeros(5, bool)).size == 0

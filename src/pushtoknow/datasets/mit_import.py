@@ -16,7 +16,8 @@ Conventions of the converted data (all SI):
   is stored in its shard group as attribute ``mit_shift`` (2,) m.
 - **Object.** ``ObjectSpec`` with the shape ``{"type": "polygon", "vertices": mit_polygon(s)}``
   (centroid frame), the catalogue mass and I_z (`mit_object`), CoM at (0, 0), height 0.013 m.
-  Friction is not given by the dataset: each push's `estimate_friction` is valid when the push
+  Friction is not given by the dataset: each push's `estimate_friction` (the contact-phase
+  rule, `mit_push.contact_phase_force`, also the real-data evaluation's) is valid when the push
   has a contact sample and the estimate lies in `FRICTION_VALID_RANGE`; the object's μ is the
   median of its pushes' valid estimates, or `FALLBACK_FRICTION` when none is valid (the spec
   needs μ > 0). Per-push estimates are stored as ``mit_friction`` (NaN when invalid), and the

@@ -30,14 +30,11 @@ MIT Push files, and reports:
 - **Reference truth.** mass and I_z from the MIT catalogue (`mit_object`, docs/DESIGN.md §11), CoM
   at the footprint centroid, (0, 0). The dataset gives no friction, so the reference μ is
   measured from the pushes that are *pure translations*: |Δθ| < `PURE_TRANSLATION_DEG` (2°)
-  between the first and the last sample. It is ``mean ‖F‖ / (m·g)`` over the **contact phase**
-  of those pushes, pooled: every sample from the first to the last one in contact (tactile
-  contact flag), including samples inside the phase whose force dropped below the contact
-  threshold. A pure translation at steady speed needs exactly μ·m·g of push to balance the
-  table's friction. Samples inside the phase are kept because at 100 mm/s the probe bounces off
-  the plate (stick-slip, force between 0 and 8 N at 50 Hz): the time average over the phase is
-  what balances friction, and dropping the low samples would bias μ up by 25% at 50 Hz (0.36
-  vs 0.29 on the rect1 centre push), while this rule gives 0.29 at both 10 and 50 Hz.
+  between the first and the last sample. It is the import's friction rule
+  (`datasets.mit_push.contact_phase_force`: mean ‖F‖ / (m·g) over each push's contact phase,
+  every sample from the first to the last one in contact), with the samples of those pushes
+  pooled. A pure translation at steady speed needs exactly μ·m·g of push to balance the
+  table's friction.
   Uncertainties of this reference: the half-filled windows at the start and end of contact
   (biased low), and the object's free sliding after the probe stops (force 0; biased low by
   m·Δv/∫F dt, ~4% here). When no push qualifies the friction truth is None (said in ``notes``)
@@ -76,7 +73,7 @@ from pushtoknow.common.params import (
     product_moments,
 )
 from pushtoknow.datasets.mit_import import IMPORT_FILE, TIME_SCALE_ATTR
-from pushtoknow.datasets.mit_push import mit_object
+from pushtoknow.datasets.mit_push import contact_phase_force, mit_object
 from pushtoknow.datasets.shards import list_shards, read_shard
 from pushtoknow.evaluation.metrics import param_ranges
 
@@ -245,14 +242,6 @@ def prepare_real_data(
 # ============================================================================================
 # Reference friction
 # ============================================================================================
-def _contact_phase_force(rec) -> np.ndarray:
-    """‖F‖ (N) of the samples from the first to the last contact sample (empty: none)."""
-    idx = np.flatnonzero(rec.tactile[:, 2] > 0.5)
-    if idx.size == 0:
-        return np.zeros(0)
-    return np.linalg.norm(rec.tactile[idx[0] : idx[-1] + 1, :2], axis=1)
-
-
 def friction_reference(
     records,
     mass: float,
@@ -272,7 +261,7 @@ def friction_reference(
     for rec in records:
         rot = math.degrees(float(rec.pose[-1, 2] - rec.pose[0, 2]))
         travel = float(np.hypot(*(rec.pose[-1, :2] - rec.pose[0, :2])))
-        f = _contact_phase_force(rec)
+        f = contact_phase_force(rec.tactile[:, :2], rec.tactile[:, 2] > 0.5)
         pure = abs(rot) < max_rotation_deg and travel >= min_travel and f.size > 0
         if pure:
             pooled.append(f)
