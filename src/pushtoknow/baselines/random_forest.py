@@ -19,7 +19,6 @@ import numpy as np
 from sklearn.ensemble import RandomForestRegressor
 
 from pushtoknow.common.angles import wrap_angle
-from pushtoknow.common.params import GRAVITY
 
 FEATURE_NAMES = (
     "contact_x",
@@ -169,11 +168,6 @@ class ForestBaseline:
         # Averaging k correlated predictions: keep the mean per-push tree spread (no 1/√k).
         std = np.sqrt(np.cumsum(s**2, 0) / k)
         return mean, std
-
-
-def force_to_mu_m(features: np.ndarray) -> np.ndarray:
-    """Quasi-static physics reading of the features: mean contact force / g ≈ μ·m (kg)."""
-    return features[:, FEATURE_NAMES.index("force_mean")] / GRAVITY
 
 
 def features_from_records(records, camera, pose_fn=None) -> np.ndarray:

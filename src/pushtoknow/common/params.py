@@ -18,7 +18,6 @@ PARAM_UNITS: dict[str, str] = {
     "com_y": "m",
     "inertia": "kg·m²",
 }
-POSE_NAMES: tuple[str, ...] = ("x", "y", "theta")
 
 # Paper Table I grid (SI). I_z in kg·m² (the paper prints g·m²).
 CATALOGUE_GRID: dict[str, tuple[float, ...]] = {

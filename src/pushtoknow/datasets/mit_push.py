@@ -107,7 +107,6 @@ MIN_ROWS = 2
 FILE_PREFIX = "motion_surface="
 SUFFIXES: tuple[str, ...] = (".json", ".h5")
 PREFERRED_SUFFIX = ".h5"  # when a push exists as both .json and .h5, iterate over this one
-KNOWN_SURFACES: tuple[str, ...] = ("abs", "delrin", "plywood", "pu")  # informative only
 _NUM = r"[-+]?\d+(?:\.\d*)?(?:[eE][-+]?\d+)?"
 _NAME_RE = re.compile(
     rf"^motion_surface=(?P<surface>[A-Za-z0-9]+)_shape=(?P<shape>[A-Za-z0-9]+)"
@@ -526,11 +525,6 @@ class MitPush:
         """Length of the common time span (s), K/rate <= duration < (K+1)/rate."""
         t = [self.raw.tip_pose[:, 0], self.raw.object_pose[:, 0], self.raw.ft_wrench[:, 0]]
         return float(min(a[-1] for a in t) - max(a[0] for a in t))
-
-    @property
-    def pusher_radius(self) -> float:
-        """m."""
-        return PUSHER_RADIUS
 
     def __len__(self) -> int:
         return len(self.times)

@@ -40,10 +40,6 @@ class SpeedProfile:
         d = np.where(t <= ts[0], 0.0, d)
         return float(d) if d.ndim == 0 else d
 
-    @property
-    def peak_speed(self) -> float:
-        return float(max(self.speeds))
-
 
 def constant_profile(speed: float, horizon: float) -> SpeedProfile:
     return SpeedProfile((0.0, horizon), (speed, speed))

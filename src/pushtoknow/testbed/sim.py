@@ -16,13 +16,7 @@ from pushtoknow.common.params import GRAVITY
 from pushtoknow.testbed import render as _render  # sets MUJOCO_GL before mujoco is imported
 from pushtoknow.testbed.config import SimConfig, check_testbed_version
 from pushtoknow.testbed.objects import ObjectSpec
-from pushtoknow.testbed.push import (
-    PAD_CLEARANCE,
-    Push,
-    SpeedProfile,
-    constant_profile,
-    release_profile,
-)
+from pushtoknow.testbed.push import PAD_CLEARANCE, Push, speed_profile
 from pushtoknow.testbed.scene import build_mjcf
 
 mujoco = _render.mujoco
@@ -76,9 +70,7 @@ class PushSimulator:
         self.model = mujoco.MjModel.from_xml_string(build_mjcf(spec, self.config))
         self.data = mujoco.MjData(self.model)
         m = self.model
-        self._pad_geom = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, "pad")
         obj_body = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "object")
-        self._object_body = obj_body
         self._object_geoms = {
             g
             for g in range(m.ngeom)
@@ -153,24 +145,7 @@ class PushSimulator:
                 total += f[0]
         return total / (self.spec.params.mass * GRAVITY)
 
-    def pad_force_on_object(self) -> np.ndarray:
-        """(2,) planar force (N, world) the pad exerts on the object at this physics step.
-
-        The pad touches nothing but the object and moves on two world-axis slide joints, so the
-        constraint force on those joints is exactly the contact force on the pad; the force on
-        the object is its opposite (no loop over contacts).
-        """
-        return -self.data.qfrc_constraint[self._pad_qvel : self._pad_qvel + 2]
-
     # ----------------------------------------------------------------- pushes
-    def profile(self, push: Push) -> SpeedProfile:
-        pc = self.config.push
-        if push.profile == "constant":
-            return constant_profile(push.speed, pc.horizon)
-        if push.profile == "release":
-            return release_profile(push.speed, pc.release_accel, pc.release_decel, pc.horizon)
-        raise ValueError(f"unknown speed profile {push.profile!r}; use 'constant' or 'release'")
-
     def pad_start(self, push: Push) -> np.ndarray:
         """Pad start on the push line, `approach_gap` (+ clearance) before the true object.
 
@@ -248,7 +223,7 @@ class PushSimulator:
             T = len(pad_track)
             start = pad_track[0]
         else:
-            profile = self.profile(push)
+            profile = speed_profile(push, self.config.push)
             T = int(round(cfg.push.horizon * rate)) + 1
             start = self.pad_start(push) if start is None else np.asarray(start, dtype=np.float64)
 
