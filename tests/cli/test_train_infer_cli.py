@@ -151,15 +151,17 @@ def test_infer_json(trained, tmp_path):
 
     (kept,) = load_recorded_objects(out)
     assert len(kept.records) == 1 and kept.truth.tolist() == truth.as_array().tolist()
-    # the README's Python call gives the same result as the command
-    from pushtoknow.inference import InferenceConfig, infer_object
+    # the README's Python calls give the same result as the command
+    from pushtoknow.inference import InferenceConfig, infer_object, infer_simulated
     from pushtoknow.models.checkpoint import load_checkpoint
     from pushtoknow.testbed.executor import SimulatedExecutor
 
     model = load_checkpoint(run)
     spec = load_object_spec("catalogue:117")
-    executor = SimulatedExecutor(spec, model.sim_config, seed=0, recentre=True)
     config = InferenceConfig(pushes=1, policy="uniform", profiles=model.profiles)
+    res = infer_simulated(model, spec, config, seed=0)
+    assert json.loads(json.dumps(res.to_json())) == report
+    executor = SimulatedExecutor(spec, model.sim_config, seed=0, recentre=True)
     res = infer_object(model, executor, config, seed=0, initial_pose=executor.initial_pose,
                        truth=spec.params.as_array(), object_name=spec.name)  # fmt: skip
     executor.close()

@@ -171,10 +171,9 @@ def run_inference(
     """Shared by `infer` and `demo`: K pushes on the testbed, tables, plot, JSON. profiles:
     None for those the model was trained on."""
     from pushtoknow.datasets.shards import write_run_pushes
-    from pushtoknow.inference.session import InferenceConfig, infer_object
+    from pushtoknow.inference.session import InferenceConfig, infer_simulated
     from pushtoknow.models.checkpoint import load_checkpoint
     from pushtoknow.pretrained import resolve_model_path
-    from pushtoknow.testbed.executor import SimulatedExecutor
     from pushtoknow.testbed.objects import load_object_spec
     from pushtoknow.viz import plot_estimates, save_push_strip
 
@@ -190,28 +189,17 @@ def run_inference(
         num_sigma_points=sigma_points,
         profiles=model.profiles if profiles is None else profiles,
     )
-    ex = SimulatedExecutor(spec, sim_cfg, seed=seed, recentre=True)
     show.print(
         f"[bold]{spec.name or 'object'}[/] ({spec.shape if isinstance(spec.shape, str) else ''})"
         f", model {model.variant} ({model_ref}), policy {policy}, {pushes} pushes, seed {seed}"
     )
-    try:
-
-        def on_push(e) -> None:
-            show.print(_estimate_table(e, truth, f"after push {e.index}"))
-
-        result = infer_object(
-            model,
-            ex,
-            cfg,
-            seed,
-            initial_pose=ex.initial_pose,
-            truth=truth,
-            object_name=spec.name or "",
-            on_push=on_push,
-        )
-    finally:
-        ex.close()
+    result = infer_simulated(
+        model,
+        spec,
+        cfg,
+        seed,
+        on_push=lambda e: show.print(_estimate_table(e, truth, f"after push {e.index}")),
+    )
     report = result.to_json()
     if out is not None:
         out.mkdir(parents=True, exist_ok=True)

@@ -40,9 +40,8 @@ class HeldoutRun:
 def _run_one(args) -> dict:
     import time
 
-    from pushtoknow.inference.session import InferenceConfig, infer_object
+    from pushtoknow.inference.session import InferenceConfig, infer_simulated
     from pushtoknow.models.checkpoint import load_checkpoint
-    from pushtoknow.testbed.executor import SimulatedExecutor
     from pushtoknow.testbed.objects import load_object_spec
 
     model_path, object_ref, pushes, policy, seed, sigma_points, profiles = args
@@ -52,15 +51,10 @@ def _run_one(args) -> dict:
     torch.set_num_threads(1)
     model = load_checkpoint(model_path)
     spec = load_object_spec(object_ref)
-    sim = model.sim_config
     cfg = InferenceConfig(
         pushes=pushes, policy=policy, num_sigma_points=sigma_points, profiles=profiles
     )
-    ex = SimulatedExecutor(spec, sim, seed=seed, recentre=True)
-    try:
-        res = infer_object(model, ex, cfg, seed, initial_pose=ex.initial_pose)
-    finally:
-        ex.close()
+    res = infer_simulated(model, spec, cfg, seed, with_truth=False)
     rows = [res.prior, *res.estimates]
     camera = model.camera
     poses = iter(res.poses)

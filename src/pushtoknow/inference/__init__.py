@@ -8,6 +8,7 @@ from pushtoknow.inference.session import (
     ObjectEstimator,
     PushEstimate,
     infer_object,
+    infer_simulated,
 )
 
 __all__ = [
@@ -18,5 +19,6 @@ __all__ = [
     "PushEstimate",
     "PushPolicy",
     "infer_object",
+    "infer_simulated",
     "make_policy",
 ]

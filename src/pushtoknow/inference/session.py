@@ -47,7 +47,8 @@ from pushtoknow.models.learned import PushContext, with_pad_track
 from pushtoknow.perception.footprint import footprint_from_mask
 from pushtoknow.perception.visnet import frames_as_tensors, visnet_measure
 from pushtoknow.testbed.config import SimConfig
-from pushtoknow.testbed.executor import PushExecutor, View
+from pushtoknow.testbed.executor import PushExecutor, SimulatedExecutor, View
+from pushtoknow.testbed.objects import ObjectSpec
 from pushtoknow.testbed.push import PROFILES, ProfileName, Push, release_points
 from pushtoknow.testbed.sim import PushRecord
 
@@ -374,3 +375,32 @@ def infer_object(
         if on_push is not None:
             on_push(e)
     return result
+
+
+def infer_simulated(
+    model: TrainedModel,
+    spec: ObjectSpec,
+    config: InferenceConfig = InferenceConfig(),
+    seed: int = 0,
+    with_truth: bool = True,
+    on_push=None,
+    policy: PushPolicy | None = None,
+) -> InferenceResult:
+    """`infer_object` on the testbed: `spec` simulated with the model's testbed settings,
+    recentred under the camera, seeded by `seed`, the first push starting from its true pose
+    (so the CoM and I_z compare with the truth, reported when `with_truth`)."""
+    executor = SimulatedExecutor(spec, model.sim_config, seed=seed, recentre=True)
+    try:
+        return infer_object(
+            model,
+            executor,
+            config,
+            seed,
+            initial_pose=executor.initial_pose,
+            truth=spec.params.as_array() if with_truth else None,
+            object_name=(spec.name or "") if with_truth else "",
+            on_push=on_push,
+            policy=policy,
+        )
+    finally:
+        executor.close()
