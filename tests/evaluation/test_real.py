@@ -156,41 +156,41 @@ def test_friction_reference_on_the_real_pushes(real_dir, real_dir_rescaled):
 # the estimates
 # ------------------------------------------------------------------------------------------
 def test_report_estimates_are_finite_with_positive_std(report):
-    assert tuple(report) == REPORT_KEYS
-    assert report["object"] == "plywood:rect1"
-    assert len(report["pushes"]) == len(report["filter"]["per_push"]) == 3
-    assert len(report["forest"]["per_push"]) == 3
-    assert report["filter"]["sigma_points"] == SIGMA_POINTS
-    filt, forest = report["filter"], report["forest"]
+    assert tuple(report.to_json()) == REPORT_KEYS
+    assert report.object == "plywood:rect1"
+    assert len(report.pushes) == len(report.filter["per_push"]) == 3
+    assert len(report.forest["per_push"]) == 3
+    assert report.filter["sigma_points"] == SIGMA_POINTS
+    filt, forest = report.filter, report.forest
     for est in [filt["prior"], *filt["per_push"], *forest["per_push"]]:
         assert set(est) == set(PARAM_NAMES)
         for p in PARAM_NAMES:
             assert math.isfinite(est[p]["mean"]) and est[p]["std"] > 0, (p, est[p])
     # The filter learns something from each push: its belief changes.
-    means = [[e[p]["mean"] for p in PARAM_NAMES] for e in report["filter"]["per_push"]]
-    prior = [report["filter"]["prior"][p]["mean"] for p in PARAM_NAMES]
+    means = [[e[p]["mean"] for p in PARAM_NAMES] for e in report.filter["per_push"]]
+    prior = [report.filter["prior"][p]["mean"] for p in PARAM_NAMES]
     assert not np.allclose(means[0], prior) and not np.allclose(means[1], means[0])
-    for p in report["pushes"]:
+    for p in report.pushes:
         assert p["speed_m_per_s"] == p["file_speed_m_per_s"] == 0.1 and p["time_scale"] == 1.0
         assert math.isfinite(p["filter_pose_error_end"]["xy_mm"])
-    assert report["forest"]["trees"] == TREES
-    assert report["forest"]["training_pushes"] == 12  # tiny dataset: 6 objects × 2 pushes
+    assert report.forest["trees"] == TREES
+    assert report.forest["training_pushes"] == 12  # tiny dataset: 6 objects × 2 pushes
 
 
 def test_report_truth_and_errors(report, forest_dir):
     obj = mit_object("rect1")
-    t = report["truth"]
+    t = report.truth
     assert (t["mass"], t["inertia"], t["com_x"], t["com_y"]) == (obj.mass, obj.inertia, 0, 0)
     assert 0.15 < t["friction"] < 0.35
-    assert report["friction_reference"]["value"] == t["friction"]
+    assert report.friction_reference["value"] == t["friction"]
     rng = {p: PARAM_RANGES[p][1] - PARAM_RANGES[p][0] for p in PARAM_NAMES}
-    for k, est in enumerate(report["filter"]["per_push"]):
-        err = report["errors"]["filter"][k]
+    for k, est in enumerate(report.filter["per_push"]):
+        err = report.errors["filter"][k]
         for p in PARAM_NAMES:
             assert err[p] == pytest.approx(abs(est[p]["mean"] - t[p]) / rng[p])
         assert err["overall"] == pytest.approx(np.mean([err[p] for p in PARAM_NAMES]))
-    f = report["forest"]["per_push"][-1]
-    assert report["errors"]["forest"][-1]["mass"] == pytest.approx(
+    f = report.forest["per_push"][-1]
+    assert report.errors["forest"][-1]["mass"] == pytest.approx(
         abs(f["mass"]["mean"] - obj.mass) / rng["mass"]
     )
     # The prior mean is the tiny dataset's per-object mean.
@@ -198,17 +198,17 @@ def test_report_truth_and_errors(report, forest_dir):
 
     episodes = [ep for s in list_shards(forest_dir) for ep in read_shard(s, images=False)]
     params = np.array([ep.spec.params.as_array() for ep in episodes])
-    np.testing.assert_allclose([report["prior_mean"][p] for p in PARAM_NAMES], params.mean(0))
+    np.testing.assert_allclose([report.prior_mean[p] for p in PARAM_NAMES], params.mean(0))
     # μ·m: truth and the forest's product of means.
-    mm = report["mu_m"]
+    mm = report.mu_m
     assert mm["truth"] == pytest.approx(obj.mass * t["friction"])
     assert mm["forest"][-1] == pytest.approx(f["mass"]["mean"] * f["friction"]["mean"])
     assert all(s["std"] > 0 for s in mm["filter"])
     # Notes: friction below the catalogue, speed mismatch, what quasi-static pushes reveal.
-    notes = " ".join(report["notes"])
+    notes = " ".join(report.notes)
     assert "friction truth" in notes and "OUTSIDE" in notes
     assert "speed mismatch" in notes and "μ·m" in notes
-    assert json.loads(json.dumps(report)) == report  # JSON-ready
+    assert json.loads(json.dumps(report.to_json())) == report.to_json()  # JSON-ready
 
 
 def test_filter_runs_the_pushes_in_order_carrying_the_posterior(report, real_dir, run_dir):
@@ -228,26 +228,26 @@ def test_filter_runs_the_pushes_in_order_carrying_the_posterior(report, real_dir
         alone = ObjectEstimator(model, real_inference_config(1), seed=0)
         alone.filter_push(rec, rec.s0, rec.pose[0])
         fresh.append(alone.estimate(1).as_dict())
-    assert report["filter"]["per_push"] == carried
-    assert report["filter"]["per_push"][1:] != fresh[1:]
+    assert report.filter["per_push"] == carried
+    assert report.filter["per_push"][1:] != fresh[1:]
 
 
 def test_deterministic_given_seed(report, real_dir, run_dir, forest_dir):
     again = estimate_real_object(
         real_dir, run_dir, forest_dir, seed=0, forest_trees=TREES, identify=False
     )
-    assert again["filter"] == report["filter"] and again["forest"] == report["forest"]
+    assert again.filter == report.filter and again.forest == report.forest
 
 
 def test_rescaled_pushes_are_labelled_at_training_speed(real_dir_rescaled, run_dir, forest_dir):
     r = estimate_real_object(
         real_dir_rescaled, run_dir, forest_dir, seed=0, forest_trees=TREES, identify=False
     )
-    for p in r["pushes"]:
+    for p in r.pushes:
         assert p["speed_m_per_s"] == pytest.approx(0.02) and p["time_scale"] == pytest.approx(5)
         assert p["file_speed_m_per_s"] == 0.1 and p["samples"] > 40
-    assert "speed mismatch" not in " ".join(r["notes"])
-    assert "time-rescaled" in " ".join(r["notes"])
+    assert "speed mismatch" not in " ".join(r.notes)
+    assert "time-rescaled" in " ".join(r.notes)
     md = markdown_table(r, "rect1")
     assert md.startswith("### rect1") and "| mass (kg) | 0.837 |" in md
     assert md.count("| filter, push") == 3
@@ -260,15 +260,15 @@ def test_raw_files_are_rescaled_to_the_training_speed_by_default(
     to; the same estimates as from the equivalent import."""
     kw = {"seed": 0, "forest_trees": TREES, "obj": "plywood:rect1", "identify": False}
     r = estimate_real_object(sample_dir, run_dir, forest_dir, import_dir=tmp_path / "imp", **kw)
-    assert r["conversion"]["imported_here"] and r["conversion"]["as_speed_m_per_s"] == 0.02
+    assert r.conversion["imported_here"] and r.conversion["as_speed_m_per_s"] == 0.02
     assert (tmp_path / "imp" / "import.json").exists()
-    assert [p["speed_m_per_s"] for p in r["pushes"]] == pytest.approx([0.02] * 3)
+    assert [p["speed_m_per_s"] for p in r.pushes] == pytest.approx([0.02] * 3)
     same = estimate_real_object(real_dir_rescaled, run_dir, forest_dir, **kw)
-    assert not same["conversion"]["imported_here"]
-    assert same["filter"] == r["filter"] and same["truth"] == r["truth"]
+    assert not same.conversion["imported_here"]
+    assert same.filter == r.filter and same.truth == r.truth
     raw = estimate_real_object(sample_dir, run_dir, forest_dir, rescale=False, **kw)
-    assert raw["conversion"]["as_speed_m_per_s"] is None and raw["conversion"]["dir"] is None
-    assert [p["speed_m_per_s"] for p in raw["pushes"]] == [0.1] * 3
+    assert raw.conversion["as_speed_m_per_s"] is None and raw.conversion["dir"] is None
+    assert [p["speed_m_per_s"] for p in raw.pushes] == [0.1] * 3
     with pytest.raises(DatasetError, match="no MIT Push files of 'hex'"):
         estimate_real_object(
             sample_dir, run_dir, forest_dir, obj="hex", forest_trees=TREES, identify=False
@@ -313,7 +313,7 @@ def test_cli_json_out_and_markdown(real_dir, run_dir, forest_dir, tmp_path, repo
     assert res.exit_code == 0, (res.output, res.exception)
     got = json.loads(res.stdout)
     assert tuple(got) == REPORT_KEYS
-    assert got["filter"] == report["filter"] and got["truth"] == report["truth"]
+    assert got["filter"] == report.filter and got["truth"] == report.truth
     assert json.loads(out.read_text())["errors"] == got["errors"]
     assert "| friction |" in md.read_text()
     # Without --json: the tables.
@@ -352,9 +352,9 @@ def test_identify_row_replays_the_recorded_clock_and_reports_every_push(
         real_dir_rescaled, run_dir, forest_dir, seed=0, forest_trees=TREES,
         identify_config=IdentifyConfig(**LIGHT_IDENTIFY),
     )  # fmt: skip
-    ident = r["identify"]
+    ident = r.identify
     assert ident["rate_hz"] == pytest.approx(50.0)
-    assert len(ident["per_push"]) == 3 and len(r["errors"]["identify"]) == 3
+    assert len(ident["per_push"]) == 3 and len(r.errors["identify"]) == 3
     assert ident["noise_std"]["estimated_from_misfit"] is True
     assert ident["noise_std"]["force_N"] > 0.05  # a real misfit, not the 0 N stored
     for p in ident["per_push"]:
@@ -363,7 +363,7 @@ def test_identify_row_replays_the_recorded_clock_and_reports_every_push(
             assert lo <= p[n]["mean"] <= hi and p[n]["std"] > 0
         assert p["mass"]["mean"] > 0 and p["friction"]["mean"] > 0 and p["inertia"]["mean"] > 0
     # μ·m is what quasi-static pushes reveal: within 40% of the measured reference
-    assert r["mu_m"]["identify"][-1]["mean"] == pytest.approx(r["mu_m"]["truth"], rel=0.4)
+    assert r.mu_m["identify"][-1]["mean"] == pytest.approx(r.mu_m["truth"], rel=0.4)
     assert "probe radius 4.75 mm" in ident["model"]
     # three pushes: the leave-one-push-out check ran and its spread joined the intervals
     assert any("leave-one-push-out" in n for n in ident["notes"])

@@ -79,13 +79,13 @@ def estimate_real(
         raise typer.Exit(2) from None
     if out is not None:
         out.parent.mkdir(parents=True, exist_ok=True)
-        out.write_text(json.dumps(report, indent=1))
+        out.write_text(json.dumps(report.to_json(), indent=1))
     if markdown is not None:
         markdown.parent.mkdir(parents=True, exist_ok=True)
-        title = f"{report['object']} (MIT Push, {len(report['pushes'])} pushes), seed {seed}"
+        title = f"{report.object} (MIT Push, {len(report.pushes)} pushes), seed {seed}"
         markdown.write_text(markdown_table(report, title))
     if as_json:
-        print(json.dumps(report))
+        print(json.dumps(report.to_json()))
         return
     _print_report(report, error_rows, model)
     for target in (out, markdown):
@@ -93,12 +93,12 @@ def estimate_real(
             console.print(f"→ {target}")
 
 
-def _print_report(report: dict, error_rows, model_ref: str) -> None:
+def _print_report(report, error_rows, model_ref: str) -> None:
     from pushtoknow.reporting.real import table_rows
 
     header, rows = table_rows(report)
     t = Table(
-        title=f"{report['object']}: {len(report['pushes'])} real pushes, model {model_ref}",
+        title=f"{report.object}: {len(report.pushes)} real pushes, model {model_ref}",
         title_justify="left",
     )
     for i, h in enumerate(header):
@@ -113,13 +113,13 @@ def _print_report(report: dict, error_rows, model_ref: str) -> None:
     for r in rows:
         t.add_row(*r)
     console.print(t)
-    for k, p in enumerate(report["pushes"]):
+    for k, p in enumerate(report.pushes):
         console.print(
             f"push {k + 1}: {p['samples']} samples at {p['speed_m_per_s']} m/s (time scale "
             f"{p['time_scale']:g}), moved {p['displacement_m'] * 100:.1f} cm, turned "
             f"{p['rotation_deg']:+.1f}°" + (" (pure translation)" if p["pure_translation"] else "")
         )
-    ident = report.get("identify")
+    ident = report.identify
     if ident is not None:
         last = ident["per_push"][-1]
         console.print(
@@ -128,9 +128,9 @@ def _print_report(report: dict, error_rows, model_ref: str) -> None:
         )
         for n in ident["notes"]:
             console.print(f"[dim]identify note:[/] {n}")
-    for n in report["notes"]:
+    for n in report.notes:
         console.print(f"[dim]note:[/] {n}")
-    console.print(f"[dim]{report['seconds']:.1f} s[/]")
+    console.print(f"[dim]{report.seconds:.1f} s[/]")
 
 
 def register(app: typer.Typer) -> None:

@@ -60,6 +60,7 @@ import json
 import math
 import tempfile
 import time
+from dataclasses import fields
 from pathlib import Path
 
 import h5py
@@ -76,10 +77,12 @@ from pushtoknow.datasets.mit_import import IMPORT_FILE, TIME_SCALE_ATTR
 from pushtoknow.datasets.mit_push import contact_phase_force, mit_object
 from pushtoknow.datasets.shards import list_shards, read_shard
 from pushtoknow.evaluation.metrics import param_ranges
+from pushtoknow.reporting.real import RealReport
 
 __all__ = [
     "PURE_TRANSLATION_DEG",
     "REPORT_KEYS",
+    "RealReport",
     "estimate_real_object",
     "friction_reference",
     "load_real_object",
@@ -91,27 +94,7 @@ PURE_TRANSLATION_DEG = 2.0  # |Δθ| below this over a push: a pure translation
 MIN_SLIDE = 0.01  # m: a push whose object travelled less did not really slide (a glancing push)
 # Push speed of the training data when the checkpoint does not record it (as `infer_object`):
 # the simulator's default constant speed, that of the shipped model's data.
-REPORT_KEYS = (
-    "object",
-    "data_dir",
-    "model",
-    "forest_data",
-    "seed",
-    "conversion",
-    "pushes",
-    "truth",
-    "truth_source",
-    "friction_reference",
-    "filter",
-    "forest",
-    "identify",
-    "prior_mean",
-    "errors",
-    "mu_m",
-    "ranges",
-    "notes",
-    "seconds",
-)
+REPORT_KEYS = tuple(f.name for f in fields(RealReport))  # the keys of its JSON
 
 
 # ============================================================================================
@@ -377,7 +360,7 @@ def estimate_real_object(
     import_dir: Path | None = None,
     identify: bool = True,
     identify_config=None,
-) -> dict:
+) -> RealReport:
     """Filter, forest, physics-based identification and prior-mean estimates on the real pushes
     of one object (module doc).
 
@@ -389,7 +372,7 @@ def estimate_real_object(
     None = the model's; identify: also fit φ by replaying the pushes in MuJoCo
     (`identify_real`), with `identify_config` (an `IdentifyConfig`, None: the defaults).
 
-    Returns a JSON-ready dict with the keys `REPORT_KEYS`, all SI:
+    Returns a `RealReport` (its `to_json()` has the keys `REPORT_KEYS`), all SI:
     object ("surface:shape"), data_dir, model, forest_data, seed;
     conversion: {"imported_here", "dir", "as_speed_m_per_s" (None: not rescaled), and when
     imported here "source", "files"};
@@ -518,36 +501,36 @@ def estimate_real_object(
             }
         )
     notes = _notes(truth, pushes, train_speed, model, mu_true)
-    return {
-        "object": f"{real['surface']}:{real['shape']}",
-        "data_dir": str(data_dir),
-        "model": str(model_path),
-        "forest_data": str(forest_data),
-        "seed": seed,
-        "conversion": conversion,
-        "pushes": pushes,
-        "truth": {n: (None if np.isnan(v) else float(v)) for n, v in zip(PARAM_NAMES, truth)},
-        "truth_source": truth_source,
-        "friction_reference": fric,
-        "filter": {
+    return RealReport(
+        object=f"{real['surface']}:{real['shape']}",
+        data_dir=str(data_dir),
+        model=str(model_path),
+        forest_data=str(forest_data),
+        seed=seed,
+        conversion=conversion,
+        pushes=pushes,
+        truth={n: (None if np.isnan(v) else float(v)) for n, v in zip(PARAM_NAMES, truth)},
+        truth_source=truth_source,
+        friction_reference=fric,
+        filter={
             "variant": model.variant,
             "sigma_points": num_sigma_points or model.inference.num_sigma_points,
             "prior": prior.as_dict(),
             "per_push": [e.as_dict() for e in estimates],
         },
-        "forest": {
+        forest={
             "per_push": [_params_dict(m, s) for m, s in zip(f_mean, f_std)],
             "training_pushes": len(X),
             "trees": forest_trees,
         },
-        "identify": ident,
-        "prior_mean": _params_dict(prior_mean),
-        "errors": errors,
-        "mu_m": mu_m,
-        "ranges": {n: list(PARAM_RANGES[n]) for n in PARAM_NAMES},
-        "notes": notes,
-        "seconds": time.perf_counter() - t0,
-    }
+        identify=ident,
+        prior_mean=_params_dict(prior_mean),
+        errors=errors,
+        mu_m=mu_m,
+        ranges={n: list(PARAM_RANGES[n]) for n in PARAM_NAMES},
+        notes=notes,
+        seconds=time.perf_counter() - t0,
+    )
 
 
 def identify_real(data_dir: Path, real: dict, seed: int, config=None) -> dict:

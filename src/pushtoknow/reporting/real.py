@@ -1,9 +1,11 @@
-"""Tables of a real-data report (`evaluation.real.estimate_real_object`): the estimates after
-each push beside the truth, the normalised errors, and the notes, as markdown."""
+"""The real-data report (`RealReport`, made by `evaluation.real.estimate_real_object`) and its
+tables: the estimates after each push beside the truth, the normalised errors, and the notes,
+as markdown."""
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass, fields
 
 from pushtoknow.common.params import PARAM_NAMES
 from pushtoknow.reporting.tables import markdown_table as md
@@ -11,33 +13,62 @@ from pushtoknow.reporting.units import format_value as _fmt
 from pushtoknow.reporting.units import labelled
 
 
-def table_rows(report: dict) -> tuple[list[str], list[list[str]]]:
+@dataclass(frozen=True)
+class RealReport:
+    """What `evaluation.real.estimate_real_object` found on one real object, SI throughout
+    (field by field in its docstring); `to_json()` gives the JSON `estimate-real` prints."""
+
+    object: str
+    data_dir: str
+    model: str
+    forest_data: str
+    seed: int
+    conversion: dict
+    pushes: list[dict]
+    truth: dict[str, float | None]
+    truth_source: dict[str, str]
+    friction_reference: dict
+    filter: dict
+    forest: dict
+    identify: dict | None
+    prior_mean: dict[str, float]
+    errors: dict
+    mu_m: dict
+    ranges: dict[str, list[float]]
+    notes: list[str]
+    seconds: float
+
+    def to_json(self) -> dict:
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+
+def table_rows(report: RealReport) -> tuple[list[str], list[list[str]]]:
     """Header and rows (strings) of the estimates table: parameter (unit), truth, filter prior,
     filter after each push (mean ± std), forest after the last push, physics-based
     identification from all pushes (when it ran), prior mean."""
-    n = len(report["filter"]["per_push"])
+    n = len(report.filter["per_push"])
     header = ["parameter", "truth", "filter prior"]
     header += [f"filter after push {k + 1}" for k in range(n)]
     header.append(f"forest ({n} pushes)")
-    ident = report.get("identify")
+    ident = report.identify
     if ident is not None:
         header.append(f"identify ({n} pushes)")
     header.append("prior mean")
     rows = []
     for p in PARAM_NAMES:
-        fp = report["filter"]["prior"][p]
-        row = [labelled(p), _fmt(report["truth"][p], p)]
+        fp = report.filter["prior"][p]
+        row = [labelled(p), _fmt(report.truth[p], p)]
         row.append(_fmt(fp["mean"], p, fp["std"]))
-        for e in report["filter"]["per_push"]:
+        for e in report.filter["per_push"]:
             row.append(_fmt(e[p]["mean"], p, e[p]["std"]))
-        f = report["forest"]["per_push"][-1][p]
+        f = report.forest["per_push"][-1][p]
         row.append(_fmt(f["mean"], p, f["std"]))
         if ident is not None:
             i = ident["per_push"][-1][p]
             row.append(_fmt(i["mean"], p, i["std"]))
-        row.append(_fmt(report["prior_mean"][p], p))
+        row.append(_fmt(report.prior_mean[p], p))
         rows.append(row)
-    mm = report["mu_m"]
+    mm = report.mu_m
     row = ["μ·m (kg)", _fmt(mm["truth"], "mu_m")]
     row.append(_fmt(mm["filter_prior"]["mean"], "mu_m", mm["filter_prior"]["std"]))
     row += [_fmt(e["mean"], "mu_m", e["std"]) for e in mm["filter"]]
@@ -49,10 +80,10 @@ def table_rows(report: dict) -> tuple[list[str], list[list[str]]]:
     return header, rows
 
 
-def error_rows(report: dict) -> tuple[list[str], list[list[str]]]:
+def error_rows(report: RealReport) -> tuple[list[str], list[list[str]]]:
     """Header and rows of the normalised errors |estimate − truth| / catalogue range."""
     header = ["predictor", *PARAM_NAMES, "overall", "μ·m"]
-    er, mm = report["errors"], report["mu_m"]["errors"]
+    er, mm = report.errors, report.mu_m["errors"]
 
     def fmt(d: dict, prod) -> list[str]:
         cells = [("—" if d[k] is None else f"{d[k]:.3f}") for k in (*PARAM_NAMES, "overall")]
@@ -70,7 +101,7 @@ def error_rows(report: dict) -> tuple[list[str], list[list[str]]]:
     return header, rows
 
 
-def markdown_table(report: dict, title: str | None = None) -> str:
+def markdown_table(report: RealReport, title: str | None = None) -> str:
     """The estimates and error tables of a report as GitHub markdown, with the notes."""
     lines = [f"### {title}", ""] if title else []
     lines += md(*table_rows(report))
@@ -83,9 +114,9 @@ def markdown_table(report: dict, title: str | None = None) -> str:
         f"turned {p['rotation_deg']:+.1f}°{' (pure translation)' if p['pure_translation'] else ''}"
         f"; filter pose error at the end {p['filter_pose_error_end']['xy_mm']:.1f} mm / "
         f"{p['filter_pose_error_end']['theta_deg']:.1f}°"
-        for k, p in enumerate(report["pushes"])
+        for k, p in enumerate(report.pushes)
     ]
-    ident = report.get("identify")
+    ident = report.identify
     if ident is not None:
         last = ident["per_push"][-1]
         noise = ident["noise_std"]
@@ -96,5 +127,5 @@ def markdown_table(report: dict, title: str | None = None) -> str:
             f"not identified (prior width kept): {', '.join(last['unidentified']) or 'none'}; "
             f"{last['rollouts']} rollouts in {last['seconds']:.0f} s"
         )
-    lines += push_lines + [""] + [f"- {n}" for n in report["notes"]] + [""]
+    lines += push_lines + [""] + [f"- {n}" for n in report.notes] + [""]
     return "\n".join(lines)
