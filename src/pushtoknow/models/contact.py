@@ -143,3 +143,76 @@ def limit_surface_push(
     )
     twist = torch.cat([_rotate(shift, th), turn.unsqueeze(-1)], dim=-1)
     return LimitSurfacePush(twist, _rotate(n, th), (1.0 + rho_sq).rsqrt(), touching)
+
+
+SLIDE_SUBSTEPS = 64  # integration steps of a free slide (to rest)
+
+
+def free_slide(
+    pose: torch.Tensor,
+    com: torch.Tensor,
+    pad: torch.Tensor,
+    direction: torch.Tensor,
+    speed: torch.Tensor,
+    friction_accel: torch.Tensor,
+    inertia_ratio: torch.Tensor,
+    footprint: torch.Tensor,
+    pad_radius: float,
+    moment_arm: torch.Tensor,
+    reach: float,
+    softness: float,
+) -> torch.Tensor:
+    """How a slider pushed at `speed` and then let go slides to rest: (B, S, 3) the displacement
+    of its frame (Δx, Δy world m, Δθ rad) from the release to rest.
+
+    pose (B, S, 3) and com (B, S, 2) (object frame) at the release; pad (B, 2) the pad's centre
+    then and direction (B,) its heading (world); speed (B,) its speed (m/s); friction_accel
+    (B, S) = μ g (m/s²); inertia_ratio (B, S) k = I_z / (m ℓ²); moment_arm ℓ (B,) or (B, S).
+
+    At the release the slider moves as the pad pushed it (`limit_surface_push`: a pad that
+    touches); then only the table's friction acts, through the same ellipsoidal limit surface:
+    with u the CoM's speed and w = ℓ ω, S = √(u² + w²), du/dt = −μ g u / S and
+    dw/dt = −(μ g / k) w / S, the CoM keeps its heading. A centred push (w = 0) slides
+    v² / (2 μ g); I_z enters through k, in the turn."""
+    eps = 1e-4  # s: a short pad advance gives the pushed twist per unit time
+    heading = torch.stack([direction.cos(), direction.sin()], -1)
+    pushed = limit_surface_push(
+        pose,
+        com,
+        pad,
+        pad + heading * (speed * eps)[:, None],
+        footprint,
+        pad_radius,
+        moment_arm,
+        reach,
+        softness,
+    )
+    touching = pushed.touching
+    rate = pushed.twist / (eps * touching.clamp_min(1e-6)).unsqueeze(-1)
+    rate = rate * (touching > 0.5).to(rate.dtype).unsqueeze(-1)  # a pad off the outline: no push
+    th = pose[..., 2]
+    c_world = _rotate(com, th)
+    omega = rate[..., 2]
+    v_com = rate[..., :2] + omega.unsqueeze(-1) * torch.stack(
+        [-c_world[..., 1], c_world[..., 0]], -1
+    )
+    arm = moment_arm if moment_arm.dim() == 2 else moment_arm[:, None]
+    u0 = v_com.norm(dim=-1)
+    w0 = arm * omega
+    s0 = torch.sqrt(u0.square() + w0.square() + 1e-18)
+    a = friction_accel.clamp_min(1e-6)
+    k = inertia_ratio.clamp_min(1e-6)
+    dt = s0 / (a * torch.minimum(torch.ones_like(k), 1.0 / k)) / SLIDE_SUBSTEPS  # to rest
+    u, w = u0, w0
+    travel = torch.zeros_like(u0)
+    turn = torch.zeros_like(u0)
+    for _ in range(SLIDE_SUBSTEPS):
+        s = torch.sqrt(u.square() + w.square() + 1e-18)
+        u_next = torch.relu(u - a * u / s * dt)
+        w_next = w.sign() * torch.relu(w.abs() - a / k * w.abs() / s * dt)
+        travel = travel + 0.5 * (u + u_next) * dt
+        turn = turn + 0.5 * (w + w_next) / arm * dt
+        u, w = u_next, w_next
+    heading_com = v_com / u0.clamp_min(1e-12).unsqueeze(-1)
+    moved = heading_com * travel.unsqueeze(-1) + _rotate(-com, th + turn) - _rotate(-com, th)
+    return torch.cat([moved, turn.unsqueeze(-1)], dim=-1)

@@ -489,8 +489,8 @@ class LearnedModelsConfig(Config):
     include_contact: bool = False
     free_slide: bool = Field(
         False,
-        description="physics structure only: a released object's slide at μ g ahead of the "
-        "stopping pad is written down (`models.physics.free_slide_gap`)",
+        description="limit-surface motion only: a released object's slide to rest through the "
+        "limit surface is written down (`models.contact.free_slide`)",
     )
 
     @property
@@ -513,8 +513,8 @@ class LearnedModelsConfig(Config):
         crop = self.encoding.crop_size
         if self.quasi_static != "network" and self.structure != "physics":
             raise ValueError("quasi_static: limit-surface needs structure: physics")
-        if self.free_slide and self.structure != "physics":
-            raise ValueError("free_slide needs structure: physics")
+        if self.free_slide and self.quasi_static != "limit-surface":
+            raise ValueError("free_slide needs quasi_static: limit-surface")
         if crop is not None and crop != self.encoder.image_size:
             raise ValueError(f"encoder.image_size must equal encoding.crop_size={crop}")
         return self

@@ -40,7 +40,12 @@ from torch import nn
 from pushtoknow.common.errors import ShapeError
 from pushtoknow.common.params import GRAVITY, PARAM_NAMES, PARAM_RANGES, denormalise_params
 from pushtoknow.filters.interfaces import DynamicsModel, ObservationModel
-from pushtoknow.models.contact import LimitSurfacePush, limit_surface_push, radius_of_gyration
+from pushtoknow.models.contact import (
+    LimitSurfacePush,
+    free_slide,
+    limit_surface_push,
+    radius_of_gyration,
+)
 from pushtoknow.models.learned import (
     POSE_DIM,
     SPEED_SCALE,
@@ -152,33 +157,6 @@ def physics_features(
     )
 
 
-def _travel(speed: torch.Tensor, decel: torch.Tensor, elapsed: torch.Tensor) -> torch.Tensor:
-    """Distance covered `elapsed` (≥ 0) s after leaving at `speed` while decelerating at `decel`
-    until at rest (m)."""
-    t = torch.minimum(elapsed, speed / decel)
-    return speed * t - 0.5 * decel * t.square()
-
-
-def free_slide_gap(
-    time: torch.Tensor, release: torch.Tensor, friction: torch.Tensor
-) -> torch.Tensor:
-    """How far a released object has slid ahead of the pad at `time` (m), (B, S).
-
-    time (B,): s since the push began; release (B, 3): (t_r, v_r, D)
-    (`testbed.push.release_points`);
-    friction (B, S): μ of each sigma point. Until t_r the pad carries the object. From t_r the
-    pad stops at D while the object, left at v_r, slides at μ g (Coulomb, a translating slider):
-    gap = max(0, x_object − x_pad) with x = v_r τ − a τ²/2 up to rest, τ = time − t_r. Zero for a
-    push that never stops (t_r = inf) and for μ g ≥ D (the object stays on the pad).
-    """
-    t_r, v_r, decel = (release[:, i : i + 1] for i in range(3))
-    elapsed = (time[:, None] - t_r).clamp_min(0.0)  # (B, 1); inf - inf never: t_r = inf → 0
-    elapsed = torch.where(torch.isfinite(t_r), elapsed, torch.zeros_like(elapsed))
-    slide = _travel(v_r, (friction * GRAVITY).clamp_min(1e-6), elapsed)
-    pad = _travel(v_r, decel.clamp_min(1e-6), elapsed)
-    return torch.relu(slide - pad)
-
-
 class LimitSurface(nn.Module):
     """Quasi-static pushing of the outline in `context.footprint` (`models.contact`) with a
     learned moment arm ℓ = κ · radius of gyration; pad_radius (m)."""
@@ -203,6 +181,31 @@ class LimitSurface(nn.Module):
             com,
             window[:, 1],
             window[:, 2],
+            fp,
+            self.pad_radius,
+            arm,
+            CONTACT_REACH,
+            CONTACT_SOFTNESS,
+        )
+
+    def slide(self, states: torch.Tensor, f: PhysicsFeatures, context: PushContext) -> torch.Tensor:
+        """(B, S, 3): the free slide (`models.contact.free_slide`) of sliders at states
+        (B, S, 3 + 5) released by the pad at its window's sample t-1 with the release speed of
+        `context.release`; μ, m and I_z of each sigma point from `f`."""
+        if context.footprint is None or context.pad_window is None or context.release is None:
+            raise ShapeError("the free slide needs the footprint, the pad's track and release")
+        pose = states[..., :POSE_DIM]
+        fp = context.footprint.to(pose.dtype)
+        arm = self.log_ratio.exp().to(pose.dtype) * radius_of_gyration(fp)
+        inertia = denormalise_params(states[..., POSE_DIM:])[..., _I]
+        return free_slide(
+            pose,
+            f.com,
+            context.pad_window.to(pose.dtype)[:, 1],
+            context.direction.to(pose.dtype),
+            context.release[:, 1].to(pose.dtype),
+            f.friction * GRAVITY,
+            inertia / (f.mass * arm[:, None].square()),
             fp,
             self.pad_radius,
             arm,
@@ -235,23 +238,24 @@ class PhysicsDynamics(DynamicsModel):
         f = physics_features(states, context, anchor, self.encoding.config.length_scale)
         delta, q = self.process_net(f.geom, f.dyn, f.gate, enc)
         if self.limit_surface is not None:
-            delta = delta + self.limit_surface(states[..., :POSE_DIM], f.com, context).twist
-        if self.free_slide:
-            delta = delta + self.slide_step(context, f.friction)
+            pushed = self.limit_surface(states[..., :POSE_DIM], f.com, context).twist
+            released = self.release_step(context) if self.free_slide else None
+            if released is not None and bool(released.any()):
+                # the release step: the pad stops, the object slides to rest without it
+                slide = self.limit_surface.slide(states, f, context)
+                pushed = torch.where(released[:, None, None], slide, pushed)
+            delta = delta + pushed
         return delta, q
 
     @staticmethod
-    def slide_step(context: PushContext, friction: torch.Tensor) -> torch.Tensor:
-        """(B, S, 3): how far a released object slides ahead of the pad over the step that ends
-        at `context.time`, along the push direction (`free_slide_gap`)."""
+    def release_step(context: PushContext) -> torch.Tensor:
+        """(B,) bool: the step that ends at `context.time` is the one whose start the pad's
+        release falls on, (t − 1)·dt ≤ t_r < t·dt (`PushContext.release`)."""
         if context.release is None or context.time is None:
             raise ShapeError("free-slide models need the pushes' release points and the time")
-        release, time = context.release.to(friction.dtype), context.time.to(friction.dtype)
-        step = free_slide_gap(time, release, friction) - free_slide_gap(
-            time - context.step_dt, release, friction
-        )
-        d = context.direction.to(friction.dtype)[:, None]
-        return torch.stack([step * d.cos(), step * d.sin(), torch.zeros_like(step)], dim=-1)
+        t_r = context.release[:, 0].to(context.time.dtype)
+        start = context.time - context.step_dt
+        return (t_r >= start - 1e-6) & (t_r < context.time - 1e-6)
 
 
 class PhysicsObservation(ObservationModel):
