@@ -1,22 +1,31 @@
 #!/usr/bin/env bash
 # Regenerate docs/RESULTS.md, docs/results.json and docs/figures/ from scratch, on the CPU:
-#   1. the shipped model's training data and the ablation variants VT-JDF, V-DDF
-#      (scripts/train-variants.sh; skipped where already done),
+#   1. the shipped model's training data and the comparison models (scripts/train-variants.sh;
+#      skipped where already done),
 #   2. the real MIT Push sample pushes (import-mit, estimate-real), the learning-efficiency and
 #      speed-profile ablations, all 88 held-out objects,
 #   3. physics-based identification on novel objects (identify-bench, mixed and constant pushes),
 #   4. `pushtoknow evaluate` (configs/evaluate.yaml, with the oracle row) on the shipped model and
-#      the variants.
-# Seeds: data 1, training 0, evaluation 0, identification benchmark 8. ~4 h on 2 cores when
-# nothing is cached.
-# Usage: bash scripts/make-results.sh [WORKDIR]   (default: runs/pretrained)
+#      the comparison models.
+# --quick: only the black-box VT-ADDF and the previous shipped model beside the shipped one, and
+# no ablations or 88-object run (~1.5 h on 2 cores instead of ~4 h when nothing is cached).
+# Seeds: data 3, training 0, evaluation 0, identification benchmark 8.
+# Usage: bash scripts/make-results.sh [--quick] [WORKDIR]   (default: runs/pretrained)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
 export MUJOCO_GL="${MUJOCO_GL:-egl}"
+QUICK=0
+if [ "${1:-}" = "--quick" ]; then QUICK=1; shift; fi
 WORK="${1:-runs/pretrained}"
 PTK=.venv/bin/pushtoknow
-bash scripts/train-variants.sh "$WORK"
+if [ "$QUICK" = 1 ]; then
+    COMPARED=(vt-addf-limit-surface vt-addf-black-box)
+else
+    COMPARED=(vt-addf-limit-surface vt-addf-physics-network vt-addf-black-box vt-jdf-black-box
+        v-ddf-black-box)
+fi
+bash scripts/train-variants.sh "$WORK" "${COMPARED[@]}"
 
 SAMPLE=../shared/datasets/mit-push-sample
 APPEND=()
@@ -46,19 +55,21 @@ if [ -d "$SAMPLE" ]; then
 else
     echo "no $SAMPLE: RESULTS.md will have no real-data section" >&2
 fi
-# learning efficiency: ~40 min; skipped where done (the run resumes)
-$PTK ablate-efficiency --config configs/efficiency.yaml --out "$WORK/efficiency" --seed 0 \
-    --markdown "$WORK/efficiency/section.md"
-APPEND+=(--append "$WORK/efficiency/section.md")
+if [ "$QUICK" = 0 ]; then
+    # learning efficiency: ~40 min; skipped where done (the run resumes)
+    $PTK ablate-efficiency --config configs/efficiency.yaml --out "$WORK/efficiency" --seed 0 \
+        --markdown "$WORK/efficiency/section.md"
+    APPEND+=(--append "$WORK/efficiency/section.md")
 
-# speed profiles: ~40 min; its data, model and conditions are skipped where done
-bash scripts/ablate-profiles.sh "$WORK/profiles"
-APPEND+=(--append "$WORK/profiles/ablation/section.md")
+    # speed profiles: ~40 min; its data, model and conditions are skipped where done
+    bash scripts/ablate-profiles.sh "$WORK/profiles"
+    APPEND+=(--append "$WORK/profiles/ablation/section.md")
 
-# all 88 held-out objects under the shipped model and uniform pushes (the suite uses 44)
-$PTK evaluate-heldout --objects 88 --pushes 5 --policy uniform --seed 0 --workers 2 \
-    --out "$WORK/heldout88.json" --markdown "$WORK/heldout88.md"
-APPEND=(--append "$WORK/heldout88.md" "${APPEND[@]}")
+    # all 88 held-out objects under the shipped model and uniform pushes (the suite uses 44)
+    $PTK evaluate-heldout --objects 88 --pushes 5 --policy uniform --seed 0 --workers 2 \
+        --out "$WORK/heldout88.json" --markdown "$WORK/heldout88.md"
+    APPEND=(--append "$WORK/heldout88.md" "${APPEND[@]}")
+fi
 
 # physics-based identification on 16 novel objects, mixed and constant-only pushes: ~15 min
 mkdir -p "$WORK/identify"
@@ -68,11 +79,13 @@ $PTK identify-bench --objects 16 --pushes 5 --profiles constant --seed 8 \
     --out "$WORK/identify/constant.json" --markdown "$WORK/identify/constant.md"
 APPEND+=(--append "$WORK/identify/mixed.md" --append "$WORK/identify/constant.md")
 
-$PTK evaluate --data "$WORK/data" --models pretrained --models "$WORK/vt-addf-physics-network" \
-    --models "$WORK/vt-addf-black-box" \
-    --models "$WORK/vt-jdf-black-box" --models "$WORK/v-ddf-black-box" --config configs/evaluate.yaml --out "$WORK/results" "${APPEND[@]}"
+MODELS=(--models pretrained)
+for name in "${COMPARED[@]}"; do MODELS+=(--models "$WORK/$name"); done
+$PTK evaluate --data "$WORK/data" "${MODELS[@]}" --config configs/evaluate.yaml \
+    --out "$WORK/results" "${APPEND[@]}"
 mkdir -p docs/figures
 cp "$WORK/results/RESULTS.md" docs/RESULTS.md
 cp "$WORK/results/results.json" docs/results.json
-cp "$WORK"/results/figures/*.png "$WORK/efficiency/efficiency.png" docs/figures/
+cp "$WORK"/results/figures/*.png docs/figures/
+if [ "$QUICK" = 0 ]; then cp "$WORK/efficiency/efficiency.png" docs/figures/; fi
 echo "docs/RESULTS.md, docs/results.json and docs/figures/ regenerated"

@@ -83,6 +83,40 @@ def test_the_oracle_reruns_a_cached_run_without_push_tracks(tmp_path, monkeypatc
     assert len(calls) == 1
 
 
+def test_the_oracle_row_is_cached_by_the_pushes_it_replays(tmp_path, monkeypatch):
+    """A second evaluation on the same pushes reuses the oracle row; other pushes recompute it."""
+    from pushtoknow.evaluation import identification, suite
+    from pushtoknow.evaluation.heldout import HeldoutRun
+
+    def base(track_value: float) -> HeldoutRun:
+        z = np.zeros((1, 2, 5))
+        return HeldoutRun(z, z, z, np.zeros((1, 2)), np.zeros((1, 5)), ["o"], [1.0],
+                          np.zeros((1, 1, 3)), np.zeros((1, 1, 3)), [["constant"]],
+                          np.zeros((1, 1, 5)), np.full((1, 1, 4, 9), track_value))  # fmt: skip
+
+    calls = []
+
+    def fake_oracle(b, objects, sim_config, seed, workers, progress):
+        calls.append(1)
+        v = float(len(calls))
+        return suite.MethodRun(np.full((1, 2, 5), v), np.ones((1, 2, 5)), np.zeros((1, 5)),
+                               ["o"], np.full((1, 2), v), 2.5, np.zeros((1, 2, 5)))  # fmt: skip
+
+    monkeypatch.setattr(identification, "oracle_run", fake_oracle)
+    cache = tmp_path / "oracle.npz"
+    args = (["o"], SHORT, 0, 1, None, cache)
+    first = suite._oracle_run(base(0.0), *args)
+    again = suite._oracle_run(base(0.0), *args)
+    assert len(calls) == 1  # from the cache
+    np.testing.assert_array_equal(again.mean, first.mean)
+    np.testing.assert_array_equal(again.product, first.product)
+    assert again.seconds_per_object == 2.5 and again.ids == ["o"]
+    other = suite._oracle_run(base(1.0), *args)  # other recorded tracks
+    assert len(calls) == 2 and other.mean[0, 0, 0] == 2.0
+    suite._oracle_run(base(1.0), ["o"], SHORT, 1, 1, None, cache)  # another seed
+    assert len(calls) == 3
+
+
 def test_product_relative_error_of_the_final_estimates():
     import numpy as np
 

@@ -36,11 +36,14 @@ def test_shipped_model_matches_its_recipe():
     assert info["objects_from"] == "catalogue-train+continuous" and info["data_seed"] == 3
     # the physics-structured models, trained on both speed profiles
     assert model.models_config.structure == "physics"
+    assert model.models_config.free_slide  # a released object's slide written down
     assert set(model.info["profiles"]) == {"constant", "release"}
     for curve in ("visnet", "supervised", "end_to_end", "calibration"):
         assert (d / f"{curve}.csv").read_text().count("\n") > 1
     # calibrated: R scaled up, finite prior
     assert model.inference.noise_scale >= 1.0
+    # the 4 samples of a release's acceleration trust the force more than the steady samples do
+    assert 1.0 <= model.inference.dynamic_noise_scale < model.inference.noise_scale
     assert np.isfinite(model.prior.cov.numpy()).all()
 
 

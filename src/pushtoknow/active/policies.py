@@ -32,7 +32,7 @@ ACTIVE_POLICY_NAMES: dict[ScoreName, str] = {"kl": "active-kl", "entropy": "acti
 class ActiveConfig(Config):
     """Active push selection. num_candidates: M pushes sampled per decision (by the caller);
     horizon_fraction: look-ahead N as a fraction of the push's filter steps (paper: 50% of
-    t_H); score: "kl" (SPEC, paper eq. 17) or "entropy" (expected parameter-entropy reduction,
+    t_H); score: "kl" (paper eq. 17) or "entropy" (expected parameter-entropy reduction,
     see `pushtoknow.active.selection`); num_sigma_points: C of the look-ahead predictions
     (None: the filter's)."""
 
