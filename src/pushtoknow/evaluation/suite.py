@@ -212,11 +212,17 @@ def _cache_key(
     return h.hexdigest()[:16]
 
 
-def _save_run(path: Path, key: str, run: HeldoutRun) -> None:
+def _save_npz(path: Path, **arrays) -> None:
+    """Write `arrays` to `path` atomically: a half-written cache is never read."""
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_suffix(".tmp.npz")
-    np.savez(
-        tmp,
+    np.savez(tmp, **arrays)
+    os.replace(tmp, path)
+
+
+def _save_run(path: Path, key: str, run: HeldoutRun) -> None:
+    _save_npz(
+        path,
         key=key,
         mean=run.mean,
         std=run.std,
@@ -234,7 +240,6 @@ def _save_run(path: Path, key: str, run: HeldoutRun) -> None:
             else {"push_actions": run.push_actions, "push_tracks": run.push_tracks}
         ),
     )
-    os.replace(tmp, path)  # atomic: a half-written cache is never read
 
 
 def _load_run(path: Path, key: str) -> HeldoutRun | None:
@@ -322,10 +327,8 @@ def _oracle_run(
                     f["zscore"],
                 )
     run = oracle_run(base, objects, sim_config, seed, workers, progress)
-    cache.parent.mkdir(parents=True, exist_ok=True)
-    tmp = cache.with_suffix(".tmp.npz")
-    np.savez(
-        tmp,
+    _save_npz(
+        cache,
         key=key,
         mean=run.mean,
         std=run.std,
@@ -335,7 +338,6 @@ def _oracle_run(
         seconds=np.array(run.seconds_per_object),
         zscore=run.zscore,
     )
-    os.replace(tmp, cache)
     return run
 
 
