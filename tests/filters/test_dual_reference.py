@@ -33,11 +33,11 @@ def test_posteriors_match_the_reference(case):
     for z in obs:
         mean, cov, info = filt(mean, cov, z, None, generator=gen)
     ref = REFERENCE[case]
-    # The paper's literal reassembly ("kept") inflates the covariance by many orders of magnitude
-    # over six steps and its weights degenerate (ESS → 1), so last-bit differences between CPUs'
-    # BLAS kernels grow to ~1e-3 there (measured: AMD EPYC vs Intel Xeon); the regular cases
-    # must match to round-off. A restructured stage that computed anything else moves these
-    # numbers by far more.
+    # The paper's literal reassembly ("kept") inflates the covariance by many orders of
+    # magnitude over six steps and its weights degenerate (ESS → 1), so last-bit differences
+    # between CPUs' BLAS kernels grow to ~1e-3 there (it matched on an AMD EPYC, not on an
+    # Intel Xeon); the regular cases must match to round-off. A restructured stage that
+    # computed anything else moves these numbers by far more.
     tol = dict(rtol=1e-2, atol=1e-2) if cross == "kept" else dict(rtol=1e-9, atol=1e-12)
     torch.testing.assert_close(mean, torch.tensor(ref["mean"], dtype=mean.dtype), **tol)
     torch.testing.assert_close(
