@@ -242,26 +242,32 @@ def _save_run(path: Path, key: str, run: HeldoutRun) -> None:
     )
 
 
-def _load_run(path: Path, key: str) -> HeldoutRun | None:
+def _load_npz(path: Path, key: str) -> dict[str, np.ndarray] | None:
+    """The arrays `_save_npz` wrote to `path`, or None when absent or written under another key."""
     if not path.exists():
         return None
     with np.load(path) as f:
-        if str(f["key"]) != key:
-            return None
-        return HeldoutRun(
-            mean=f["mean"],
-            std=f["std"],
-            zscore=f["zscore"],
-            product=f["product"],
-            truth=f["truth"],
-            ids=[str(i) for i in f["ids"]],
-            seconds=f["seconds"].tolist(),
-            features_truth=f["features_truth"],
-            features_vision=f["features_vision"],
-            profiles=f["profiles"].tolist(),
-            push_actions=f["push_actions"] if "push_actions" in f.files else None,
-            push_tracks=f["push_tracks"] if "push_tracks" in f.files else None,
-        )
+        return dict(f) if str(f["key"]) == key else None
+
+
+def _load_run(path: Path, key: str) -> HeldoutRun | None:
+    f = _load_npz(path, key)
+    if f is None:
+        return None
+    return HeldoutRun(
+        mean=f["mean"],
+        std=f["std"],
+        zscore=f["zscore"],
+        product=f["product"],
+        truth=f["truth"],
+        ids=[str(i) for i in f["ids"]],
+        seconds=f["seconds"].tolist(),
+        features_truth=f["features_truth"],
+        features_vision=f["features_vision"],
+        profiles=f["profiles"].tolist(),
+        push_actions=f.get("push_actions"),
+        push_tracks=f.get("push_tracks"),
+    )
 
 
 def _inference_run(
@@ -314,18 +320,17 @@ def _oracle_run(
         h.update(np.ascontiguousarray(a).tobytes())
     h.update(json.dumps([objects, seed, sim_config.model_dump(mode="json")]).encode())
     key = h.hexdigest()[:16]
-    if cache.exists():
-        with np.load(cache) as f:
-            if str(f["key"]) == key:
-                return MethodRun(
-                    f["mean"],
-                    f["std"],
-                    f["truth"],
-                    [str(i) for i in f["ids"]],
-                    f["product"],
-                    float(f["seconds"]),
-                    f["zscore"],
-                )
+    f = _load_npz(cache, key)
+    if f is not None:
+        return MethodRun(
+            f["mean"],
+            f["std"],
+            f["truth"],
+            [str(i) for i in f["ids"]],
+            f["product"],
+            float(f["seconds"]),
+            f["zscore"],
+        )
     run = oracle_run(base, objects, sim_config, seed, workers, progress)
     _save_npz(
         cache,
