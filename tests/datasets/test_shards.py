@@ -6,7 +6,7 @@ import h5py
 import numpy as np
 import pytest
 
-from pushtoknow.common.errors import DatasetError
+from pushtoknow.common.errors import DatasetError, ObjectSpecError
 from pushtoknow.datasets.generate import GenerationConfig, generate_dataset, select_objects
 from pushtoknow.datasets.shards import dataset_info, open_shard, read_shard, shard_path
 from pushtoknow.datasets.torch_dataset import PushDataset
@@ -202,3 +202,16 @@ def test_a_refused_resume_writes_no_provenance_record(tmp_path, dataset):
     assert generate_dataset(copy, cfg(), progress=False)["shards_skipped"] == 2
     info = dataset_info(copy, verify=True)
     assert info["verified_shards"] == 2
+
+
+def test_novel_objects_are_the_evaluations_kind():
+    """`--objects-from novel`: the evaluation's novel objects for the seed, unseen shapes among
+    them, each a valid object with continuous parameters."""
+    from pushtoknow.testbed.objects import NOVEL_SHAPES, novel_objects
+
+    specs = select_objects("novel", 6, 23)
+    assert [s.to_dict() for s in specs] == [s.to_dict() for s in novel_objects(6, 23)]
+    assert any(s.name.split(":")[-1] in NOVEL_SHAPES for s in specs)
+    assert specs != select_objects("novel", 6, 24)
+    with pytest.raises(ObjectSpecError, match="'novel'"):
+        select_objects("novle", 2, 0)

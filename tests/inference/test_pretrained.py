@@ -37,6 +37,8 @@ def test_shipped_model_matches_its_recipe():
     # the physics-structured models, trained on both speed profiles
     assert model.models_config.structure == "physics"
     assert model.models_config.free_slide  # a released object's slide written down
+    # m, μ and I_z enter motion only through the written-down slide
+    assert not model.models_config.dynamic_motion_params
     assert set(model.info["profiles"]) == {"constant", "release"}
     for curve in ("visnet", "supervised", "end_to_end", "calibration"):
         assert (d / f"{curve}.csv").read_text().count("\n") > 1

@@ -11,7 +11,7 @@ from pushtoknow.common.errors import ShapeError
 from pushtoknow.common.params import GRAVITY, normalise_params
 from pushtoknow.filters import DualFilter
 from pushtoknow.models import build_filter, build_learned_models
-from pushtoknow.models.learned import pad_windows, with_pad_track
+from pushtoknow.models.learned import LearnedModelsConfig, pad_windows, with_pad_track
 
 F64 = torch.float64
 DT = 0.1
@@ -20,7 +20,7 @@ DT = 0.1
 QUASI_STATIC = ["network", "limit-surface"]
 
 
-def physics_config(quasi_static: str = "network"):
+def physics_config(quasi_static: str = "network", dynamic_motion_params: bool = True):
     """tiny_config with the physics structure and hidden layers wide enough that no random
     initialisation leaves a head constant (dead ReLUs)."""
     cfg = tiny_config()
@@ -28,15 +28,18 @@ def physics_config(quasi_static: str = "network"):
         update={
             "structure": "physics",
             "quasi_static": quasi_static,
+            "dynamic_motion_params": dynamic_motion_params,
             "process": cfg.process.model_copy(update={"hidden_dims": (32, 32)}),
             "tac": cfg.tac.model_copy(update={"hidden_dims": (32, 32, 32)}),
         }
     )
 
 
-def physics_models(seed: int = 0, quasi_static: str = "network"):
+def physics_models(
+    seed: int = 0, quasi_static: str = "network", dynamic_motion_params: bool = True
+):
     torch.manual_seed(seed)
-    models = build_learned_models(physics_config(quasi_static))
+    models = build_learned_models(physics_config(quasi_static, dynamic_motion_params))
     for m in models.modules().modules():
         if isinstance(m, torch.nn.Linear):  # tiny nets: make every output depend on its inputs
             torch.nn.init.normal_(m.weight, std=0.8)
@@ -154,6 +157,28 @@ def test_dynamic_motion_sees_friction_and_inertia_per_mass_but_not_mass(quasi_st
     d3, _ = models.dynamics(states_with(0.4, 0.3, 1e-3), ctx)
     assert torch.allclose(d1, d2, rtol=1e-9, atol=1e-12)
     assert not torch.allclose(d1, d3)
+
+
+@pytest.mark.parametrize("quasi_static", QUASI_STATIC)
+def test_kinematic_dynamic_motion_never_depends_on_mass_friction_or_inertia(quasi_static):
+    """dynamic_motion_params False: while the pad accelerates the motion network still
+    switches on (the motion differs from a steady push's) but sees no parameter but the CoM."""
+    _, models = physics_models(quasi_static=quasi_static, dynamic_motion_params=False)
+    ctx = context_with_path(accelerating_path(2.0), 3)
+    d1, q1 = models.dynamics(states_with(0.4, 0.5, 1e-3), ctx)
+    d2, q2 = models.dynamics(states_with(1.1, 0.3, 0.6e-3), ctx)
+    assert torch.equal(d1, d2) and torch.equal(q1, q2)
+    d3, _ = models.dynamics(states_with(0.4, 0.5, 1e-3, com=(-0.01, 0.01)), ctx)
+    assert not torch.allclose(d1, d3)
+    steady, _ = models.dynamics(states_with(0.4, 0.5, 1e-3), context_with_path(steady_path(), 3))
+    assert not torch.allclose(d1, steady)
+
+
+def test_kinematic_dynamic_motion_needs_the_physics_structure():
+    with pytest.raises(ValueError, match="dynamic_motion_params: false needs structure: physics"):
+        LearnedModelsConfig.model_validate(
+            {**tiny_config().model_dump(), "dynamic_motion_params": False}
+        )
 
 
 @pytest.mark.parametrize("quasi_static", QUASI_STATIC)

@@ -39,7 +39,9 @@ def simulate(
         "catalogue",
         "--objects-from",
         help="catalogue | catalogue-train | catalogue-test | continuous | "
-        "catalogue-train+continuous (alternately) | FILE (JSON/YAML specs)",
+        "catalogue-train+continuous (alternately) | novel (the evaluation's novel objects: "
+        "unseen shapes and catalogue shapes alternately, continuous parameters) | "
+        "FILE (JSON/YAML specs)",
     ),
     profiles: str = typer.Option(
         "constant", "--profiles", help="comma-separated speed profiles: constant,release"
@@ -161,7 +163,7 @@ def collect(
     objects_from: str = typer.Option(
         "catalogue-train",
         "--objects-from",
-        help="catalogue | catalogue-train | catalogue-test | continuous | FILE",
+        help="catalogue | catalogue-train | catalogue-test | continuous | novel | FILE",
     ),
     first_object_index: int = typer.Option(
         0, "--first-object-index", min=0, help="skip this many objects of the seeded order"

@@ -1,5 +1,5 @@
 """`pushtoknow` commands: evaluation (evaluate-heldout, ablate-profiles, evaluate,
-ablate-efficiency)."""
+ablate-efficiency, ridge)."""
 
 from __future__ import annotations
 
@@ -323,3 +323,53 @@ def ablate_efficiency(
     console.print(
         f"wrote {out / 'efficiency.json'}, {out / 'efficiency.csv'}, {out / 'efficiency.png'}"
     )
+
+
+@app.command("ridge")
+def ridge_cmd(
+    model: str = typer.Option("pretrained", "--model", help="pretrained[:NAME] or a run folder"),
+    data: Path = typer.Option(..., "--data", help="recorded pushes (a simulate dataset)"),
+    max_objects: int = typer.Option(None, "--max-objects", min=1, help="default: all"),
+    as_json: bool = typer.Option(False, "--json", help="print the result as JSON"),
+):
+    """Where each part of a model places the pushes on the m-against-μ ridge: the one-step
+    misfit at (m·e^δ, μ·e^−δ), every other parameter true, split into the free slide, the other
+    dynamic steps, the steady steps and the force (docs/DESIGN.md §10). A part whose best δ
+    is far from 0 biases m and μ push after push; a part with no rise cannot tell them apart."""
+    from pushtoknow.evaluation.ridge import RIDGE_PARTS, ridge_misfit
+    from pushtoknow.models.checkpoint import load_checkpoint
+    from pushtoknow.pretrained import resolve_model_path
+    from pushtoknow.training.data import load_push_tensors
+
+    try:
+        trained = load_checkpoint(resolve_model_path(model)).eval()
+        pushes = load_push_tensors(data, max_objects)
+    except (PushToKnowError, OSError) as e:
+        fail(e)
+    r = ridge_misfit(trained, pushes)
+    kinds = {"release": r.release, "constant": ~r.release}
+    rows = [
+        {
+            "part": part,
+            "pushes": kind,
+            "count": int(mask.sum()),
+            "best_delta": r.best_delta(part, mask) if mask.any() else None,
+            "rise_nats": r.rise(part, mask) if mask.any() else 0.0,
+        }
+        for kind, mask in kinds.items()
+        for part in RIDGE_PARTS
+    ]
+    if as_json:
+        print(
+            json.dumps(
+                {"model": model, "data": str(data), "deltas": r.deltas.tolist(), "parts": rows}
+            )
+        )
+        return
+    t = Table(title="m-against-μ ridge: best δ = log(m/m_true) = −log(μ/μ_true)")
+    for c in ("pushes", "part", "n", "best δ", "rise (nats)"):
+        t.add_column(c, justify="right")
+    for row in rows:
+        best = "flat" if row["best_delta"] is None else f"{row['best_delta']:+.2f}"
+        t.add_row(row["pushes"], row["part"], str(row["count"]), best, f"{row['rise_nats']:.1f}")
+    console.print(t)

@@ -36,6 +36,7 @@ from pushtoknow.testbed.objects import (
     build_catalogue,
     catalogue_split,
     load_object_spec,
+    novel_objects,
     sample_continuous_object,
 )
 from pushtoknow.testbed.push import Push
@@ -48,7 +49,7 @@ class GenerationConfig(Config):
     objects_from: str = Field(
         "catalogue",
         description="catalogue | catalogue-train | catalogue-test | continuous | "
-        "catalogue-train+continuous | FILE",
+        "catalogue-train+continuous | novel | FILE",
     )
     profiles: tuple[Literal["constant", "release"], ...] = ("constant",)
     objects_per_shard: int = Field(4, gt=0)
@@ -78,10 +79,14 @@ def select_objects(objects_from: str, n: int, seed: int) -> list[ObjectSpec]:
         grid = select_objects("catalogue-train", (n + 1) // 2, seed)
         cont = select_objects("continuous", n // 2, seed)
         return [grid[i // 2] if i % 2 == 0 else cont[i // 2] for i in range(n)]
+    if objects_from == "novel":  # the evaluation's kind of object: unseen shapes among them
+        return novel_objects(n, seed)
     path = Path(objects_from)
     if not path.exists():
         raise ObjectSpecError(
-            "--objects-from", objects_from, "neither 'catalogue', 'continuous' nor an existing file"
+            "--objects-from",
+            objects_from,
+            "neither 'catalogue', 'continuous', 'novel' nor an existing file",
         )
     data = yaml.safe_load(path.read_text())
     items = data.get("objects", data) if isinstance(data, dict) else data

@@ -492,15 +492,24 @@ class LearnedModelsConfig(Config):
         description="limit-surface motion only: a released object's slide to rest through the "
         "limit surface is written down (`models.contact.free_slide`)",
     )
+    dynamic_motion_params: bool = Field(
+        True,
+        description="physics structure only: the dynamic motion network sees μ and I_z/m "
+        "through its dimensionless groups (true) or the pad's kinematics alone (false: m, μ "
+        "and I_z then enter motion only where it is written down, the free slide)",
+    )
 
     @property
     def label(self) -> str:
         """The structure as reports name it: "black-box", "physics" or
-        "physics-limit-surface", with "-free-slide" when the free slide is written down."""
+        "physics-limit-surface", with "-free-slide" when the free slide is written down and
+        "-kinematic-dynamic" when the dynamic motion network does not see the parameters."""
         label: str = self.structure
         if self.quasi_static != "network":
             label = f"{label}-{self.quasi_static}"
-        return f"{label}-free-slide" if self.free_slide else label
+        if self.free_slide:
+            label = f"{label}-free-slide"
+        return label if self.dynamic_motion_params else f"{label}-kinematic-dynamic"
 
     @model_validator(mode="after")
     def _consistent(self) -> LearnedModelsConfig:
@@ -515,6 +524,8 @@ class LearnedModelsConfig(Config):
             raise ValueError("quasi_static: limit-surface needs structure: physics")
         if self.free_slide and self.quasi_static != "limit-surface":
             raise ValueError("free_slide needs quasi_static: limit-surface")
+        if not self.dynamic_motion_params and self.structure != "physics":
+            raise ValueError("dynamic_motion_params: false needs structure: physics")
         if crop is not None and crop != self.encoder.image_size:
             raise ValueError(f"encoder.image_size must equal encoding.crop_size={crop}")
         return self
@@ -579,7 +590,9 @@ def _physics_models(
     if config.quasi_static == "limit-surface":
         limit_surface = physics.LimitSurface(config.pad_radius)
     return LearnedModels(
-        physics.PhysicsDynamics(encoding, process, limit_surface, config.free_slide),
+        physics.PhysicsDynamics(
+            encoding, process, limit_surface, config.free_slide, config.dynamic_motion_params
+        ),
         physics.PhysicsObservation(encoding, tac),
         LearnedObservationNoise(ObsNoiseNet(config.obs_noise)),
     )

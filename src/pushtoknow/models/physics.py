@@ -102,11 +102,17 @@ class PhysicsFeatures:
 
 
 def physics_features(
-    states: torch.Tensor, context: PushContext, anchor: torch.Tensor, length_scale: float
+    states: torch.Tensor,
+    context: PushContext,
+    anchor: torch.Tensor,
+    length_scale: float,
+    motion_params: bool = True,
 ) -> PhysicsFeatures:
     """Features of states (B, S, 3 + 5) (pose, normalised φ); anchor (B, S or 1, 3): the pose
     each encoding was computed at. The pose, deviation and pad-in-object-frame features are
-    the black-box models' (`sigma_point_features`), without m, μ, I_z and the nominal speed."""
+    the black-box models' (`sigma_point_features`), without m, μ, I_z and the nominal speed.
+    motion_params False: `dyn` carries the pad's kinematics alone (μ and I_z/m set to their
+    catalogue centres, a/g and v²/(2gL) in place of a/(μg) and v²/(2μgL))."""
     dt = states.dtype
     th = states[..., 2]
     base = sigma_point_features(states, context.pose0, anchor, length_scale, context)
@@ -128,14 +134,20 @@ def physics_features(
     centre, half = _ratio_normalisation(length_scale)
     ratio = ((torch.log(inertia / (mass * length_scale**2)) - centre) / half).unsqueeze(-1)
     mu_g = friction * GRAVITY
+    mu_norm = states[..., 3 + _MU : 3 + _MU + 1]
     a_now = accel.norm(dim=-1).unsqueeze(1)  # (B, 1)
     a_prev = accel_prev.norm(dim=-1).unsqueeze(1)
     speed_sq = velocity.square().sum(-1).unsqueeze(1)
+    motion_ratio = ratio
+    if not motion_params:
+        mu_g = torch.full_like(mu_g, GRAVITY)
+        mu_norm = torch.zeros_like(mu_norm)
+        motion_ratio = torch.zeros_like(ratio)
     dyn = torch.cat(
         [
             geom,
-            states[..., 3 + _MU : 3 + _MU + 1],
-            ratio,
+            mu_norm,
+            motion_ratio,
             (a_now / mu_g).unsqueeze(-1),
             (a_prev / mu_g).unsqueeze(-1),
             (speed_sq / (2 * mu_g * length_scale)).unsqueeze(-1),
@@ -224,18 +236,21 @@ class PhysicsDynamics(DynamicsModel):
         process_net: PhysicsProcessNet,
         limit_surface: LimitSurface | None = None,
         free_slide: bool = False,
+        motion_params: bool = True,
     ):
         super().__init__()
         self.encoding = encoding
         self.process_net = process_net
         self.limit_surface = limit_surface
         self.free_slide = free_slide
+        self.motion_params = motion_params
 
     def forward(
         self, states: torch.Tensor, context: PushContext
     ) -> tuple[torch.Tensor, torch.Tensor]:
         enc, anchor = self.encoding(states[..., :POSE_DIM], context)
-        f = physics_features(states, context, anchor, self.encoding.config.length_scale)
+        length = self.encoding.config.length_scale
+        f = physics_features(states, context, anchor, length, self.motion_params)
         delta, q = self.process_net(f.geom, f.dyn, f.gate, enc)
         if self.limit_surface is not None:
             pushed = self.limit_surface(states[..., :POSE_DIM], f.com, context).twist
