@@ -50,7 +50,7 @@ class RidgeMisfit:
         total = rows.sum(0)
         if total.max() - total.min() < FLAT_NATS:
             return None
-        return float(self.deltas[int(np.argmin(total))])
+        return round(float(self.deltas[int(np.argmin(total))]), 9)
 
     def rise(self, part: str, pushes: np.ndarray | None = None) -> float:
         """How much the part's summed misfit rises over the scanned δ (nats): its say on m vs μ."""
