@@ -38,16 +38,9 @@ def test_posteriors_match_the_reference(case):
     # between CPUs' BLAS kernels grow to ~1e-3 there (it matched on an AMD EPYC, not on an
     # Intel Xeon); the regular cases must match to round-off. A restructured stage that
     # computed anything else moves these numbers by far more.
-    tol = dict(rtol=1e-2, atol=1e-2) if cross == "kept" else dict(rtol=1e-9, atol=1e-12)
-    torch.testing.assert_close(mean, torch.tensor(ref["mean"], dtype=mean.dtype), **tol)
-    torch.testing.assert_close(
-        cov,
-        torch.tensor(ref["cov"], dtype=cov.dtype),
-        **(tol if cross == "kept" else dict(rtol=1e-9, atol=1e-14)),
-    )
-    torch.testing.assert_close(
-        info.ess,
-        torch.tensor(ref["ess"], dtype=info.ess.dtype),
-        **(tol if cross == "kept" else dict(rtol=1e-9, atol=1e-9)),
-    )
+    round_off = {"mean": (1e-9, 1e-12), "cov": (1e-9, 1e-14), "ess": (1e-9, 1e-9)}
+    for name, value in (("mean", mean), ("cov", cov), ("ess", info.ess)):
+        rtol, atol = (1e-2, 1e-2) if cross == "kept" else round_off[name]
+        expected = torch.tensor(ref[name], dtype=value.dtype)
+        torch.testing.assert_close(value, expected, rtol=rtol, atol=atol)
     assert info.stages.tolist() == ref["stages"]

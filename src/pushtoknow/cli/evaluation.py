@@ -346,15 +346,15 @@ def ridge_cmd(
         pushes = load_push_tensors(data, max_objects)
     except (PushToKnowError, OSError) as e:
         fail(e)
-    r = ridge_misfit(trained, pushes)
+    r = ridge_misfit(trained, pushes, progress=True)
     kinds = {"release": r.release, "constant": ~r.release}
     rows = [
         {
             "part": part,
             "pushes": kind,
             "count": int(mask.sum()),
-            "best_delta": r.best_delta(part, mask) if mask.any() else None,
-            "rise_nats": r.rise(part, mask) if mask.any() else 0.0,
+            "best_delta": r.best_delta(part, mask),
+            "rise_nats": r.rise(part, mask),
         }
         for kind, mask in kinds.items()
         for part in RIDGE_PARTS

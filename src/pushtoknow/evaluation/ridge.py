@@ -10,13 +10,13 @@ the filter's m and μ apart from the truth push after push, whatever the calibra
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
 import torch
 
 from pushtoknow.common.params import normalise_params
+from pushtoknow.common.progress import progress_bar
 from pushtoknow.models.checkpoint import TrainedModel
 from pushtoknow.models.physics import PhysicsDynamics
 from pushtoknow.training.data import PushTensors
@@ -43,66 +43,76 @@ class RidgeMisfit:
     misfit: dict[str, np.ndarray]
     release: np.ndarray
 
+    def _total(self, part: str, pushes: np.ndarray | None) -> np.ndarray:
+        """(D,) the part's misfit summed over `pushes` (bool (N,), default all)."""
+        rows = self.misfit[part] if pushes is None else self.misfit[part][pushes]
+        return rows.sum(0)
+
     def best_delta(self, part: str, pushes: np.ndarray | None = None) -> float | None:
         """δ minimising the part's misfit summed over `pushes` (bool (N,), default all); None
         where it barely depends on δ (a rise below FLAT_NATS)."""
-        rows = self.misfit[part] if pushes is None else self.misfit[part][pushes]
-        total = rows.sum(0)
-        if total.max() - total.min() < FLAT_NATS:
+        if self.rise(part, pushes) < FLAT_NATS:
             return None
-        return round(float(self.deltas[int(np.argmin(total))]), 9)
+        return round(float(self.deltas[int(np.argmin(self._total(part, pushes)))]), 9)
 
     def rise(self, part: str, pushes: np.ndarray | None = None) -> float:
         """How much the part's summed misfit rises over the scanned δ (nats): its say on m vs μ."""
-        rows = self.misfit[part] if pushes is None else self.misfit[part][pushes]
-        total = rows.sum(0)
+        total = self._total(part, pushes)
         return float(total.max() - total.min())
 
 
-def _one_step_misfits(model: TrainedModel, pt: PushTensors, params_norm: torch.Tensor) -> dict:
-    """Per push (N,) summed misfits of each part at the given normalised parameters (N, 5)."""
+def _one_step_misfits(
+    model: TrainedModel, pt: PushTensors, params_norm: torch.Tensor, progress: bool
+) -> dict[str, np.ndarray]:
+    """Per push and parameter set (N, D) summed misfits of each part; params_norm (N, D, 5).
+    The D parameter sets of a push ride as the models' sigma points, so each step's context,
+    encoding and measurement are computed once."""
     n, t_len = pt.pose.shape[:2]
+    d = params_norm.shape[1]
     push = torch.arange(n)
-    out = {p: np.zeros(n) for p in RIDGE_PARTS}
+    out = {p: np.zeros((n, d)) for p in RIDGE_PARTS}
     dyn = model.models.dynamics
-    for t in range(t_len - 1):
-        ctx = push_context(pt, push, torch.full((n,), t + 1))
-        state = torch.cat([pt.pose[:, t], params_norm], -1).unsqueeze(1)
-        delta, q = dyn(state, ctx)
-        target = (pt.pose[:, t + 1] - pt.pose[:, t]).unsqueeze(1)
-        motion = (0.5 * (delta - target).square() / q).sum(-1)[:, 0].numpy()
-        accelerating = ctx.pad_accelerating().numpy().astype(bool)
-        slide = np.zeros(n, bool)
-        if isinstance(dyn, PhysicsDynamics) and dyn.free_slide:
-            slide = PhysicsDynamics.release_step(ctx).numpy()
-        out["slide"] += np.where(slide, motion, 0.0)
-        out["dynamic_motion"] += np.where(~slide & accelerating, motion, 0.0)
-        out["steady_motion"] += np.where(~slide & ~accelerating, motion, 0.0)
-        after = torch.cat([pt.pose[:, t + 1], params_norm], -1).unsqueeze(1)
-        predicted = model.models.observation(after, ctx)[:, 0]
-        if predicted.shape[-1] > 3:  # a tactile model
-            z = observation(pt, push, torch.full((n,), t + 1))
-            r = model.models.observation_noise(z, ctx)
-            force = (0.5 * (predicted[:, 3:5] - z[:, 3:5]).square() / r[:, 3:5]).sum(-1).numpy()
-            out["dynamic_force"] += np.where(accelerating, force, 0.0)
-            out["steady_force"] += np.where(~accelerating, force, 0.0)
+    with progress_bar(progress) as bar:
+        for t in bar.track(range(t_len - 1), description="ridge misfit (steps)"):
+            ctx = push_context(pt, push, torch.full((n,), t + 1))
+            state = torch.cat([pt.pose[:, None, t].expand(n, d, -1), params_norm], -1)
+            delta, q = dyn(state, ctx)
+            target = (pt.pose[:, t + 1] - pt.pose[:, t]).unsqueeze(1)
+            motion = (0.5 * (delta - target).square() / q).sum(-1).numpy()
+            accelerating = ctx.pad_accelerating().numpy().astype(bool)[:, None]
+            slide = np.zeros((n, 1), bool)
+            if isinstance(dyn, PhysicsDynamics) and dyn.free_slide:
+                slide = PhysicsDynamics.release_step(ctx).numpy()[:, None]
+            out["slide"] += np.where(slide, motion, 0.0)
+            out["dynamic_motion"] += np.where(~slide & accelerating, motion, 0.0)
+            out["steady_motion"] += np.where(~slide & ~accelerating, motion, 0.0)
+            after = torch.cat([pt.pose[:, None, t + 1].expand(n, d, -1), params_norm], -1)
+            predicted = model.models.observation(after, ctx)
+            if predicted.shape[-1] > 3:  # a tactile model
+                z = observation(pt, push, torch.full((n,), t + 1))
+                r = model.models.observation_noise(z, ctx)[:, None, 3:5]
+                resid = predicted[..., 3:5] - z[:, None, 3:5]
+                force = (0.5 * resid.square() / r).sum(-1).numpy()
+                out["dynamic_force"] += np.where(accelerating, force, 0.0)
+                out["steady_force"] += np.where(~accelerating, force, 0.0)
     return out
 
 
 def ridge_misfit(
-    model: TrainedModel, pt: PushTensors, deltas: np.ndarray | None = None
+    model: TrainedModel,
+    pt: PushTensors,
+    deltas: np.ndarray | None = None,
+    progress: bool = False,
 ) -> RidgeMisfit:
     """Each part's misfit at (m·e^δ, μ·e^−δ) and the other parameters true, for every δ of
     `deltas` (default −0.4 … 0.4 in steps of 0.05), on the pushes of `pt`."""
     deltas = np.linspace(-0.4, 0.4, 17) if deltas is None else np.asarray(deltas, float)
-    curves = {p: np.zeros((len(pt), len(deltas))) for p in RIDGE_PARTS}
+    params = pt.params.double()[:, None, :].repeat(1, len(deltas), 1)  # (N, D, 5) SI
+    shift = torch.as_tensor(deltas, dtype=params.dtype)
+    params[..., 0] *= shift.exp()
+    params[..., 1] *= (-shift).exp()
+    norm = normalise_params(params).to(pt.pose.dtype)
     with torch.no_grad():
-        for j, d in enumerate(deltas):
-            params = pt.params.clone().double()
-            params[:, 0] *= math.exp(d)
-            params[:, 1] *= math.exp(-d)
-            norm = torch.as_tensor(normalise_params(params.numpy()), dtype=pt.pose.dtype)
-            for part, values in _one_step_misfits(model, pt, norm).items():
-                curves[part][:, j] = values
+        curves = _one_step_misfits(model, pt, norm, progress)
     release = np.isfinite(pt.release[:, 0].numpy())
     return RidgeMisfit(deltas, curves, release)
