@@ -7,8 +7,8 @@
 #   3. physics-based identification on novel objects (identify-bench, mixed and constant pushes),
 #   4. `pushtoknow evaluate` (configs/evaluate.yaml, with the oracle row) on the shipped model and
 #      the comparison models.
-# --quick: only the black-box VT-ADDF and the two previous shipped models beside the shipped one, and
-# no ablations or 88-object run (~1.5 h on 2 cores instead of ~4 h when nothing is cached).
+# --quick: only the paper's black-box VT-ADDF beside the shipped model, and no ablations or
+# 88-object run (~1.5 h on 2 cores instead of ~4.5 h when nothing is cached).
 # Seeds: data 3, training 0, evaluation 0, identification benchmark 8.
 # Usage: bash scripts/make-results.sh [--quick] [WORKDIR]   (default: runs/pretrained)
 set -euo pipefail
@@ -20,7 +20,7 @@ if [ "${1:-}" = "--quick" ]; then QUICK=1; shift; fi
 WORK="${1:-runs/pretrained}"
 PTK=.venv/bin/pushtoknow
 if [ "$QUICK" = 1 ]; then
-    COMPARED=(vt-addf-free-slide vt-addf-limit-surface vt-addf-black-box)
+    COMPARED=(vt-addf-black-box)
 else
     COMPARED=(vt-addf-free-slide vt-addf-limit-surface vt-addf-physics-network vt-addf-black-box
         vt-jdf-black-box v-ddf-black-box)

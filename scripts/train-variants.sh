@@ -4,8 +4,8 @@
 # the shipped model's VisNet, so they differ from it only in the model structure and the filter:
 #   vt-addf-black-box, vt-jdf-black-box, v-ddf-black-box: the paper's black-box VT-ADDF, VT-JDF
 #       and V-DDF (configs/variants.yaml: the shipped recipe without its end-to-end stage);
-#   vt-addf-free-slide: the previous shipped model (configs/vt-addf-free-slide.yaml: its dynamic
-#       motion network sees μ and I_z/m);
+#   vt-addf-free-slide: the shipped networks before `dynamic_motion_params: false`
+#       (configs/vt-addf-free-slide.yaml: its dynamic motion network sees μ and I_z/m);
 #   vt-addf-limit-surface: the one before it (configs/vt-addf-limit-surface.yaml: no free slide
 #       after a release);
 #   vt-addf-physics-network: the one before that (configs/vt-addf-physics-network.yaml: quasi-static

@@ -6,6 +6,7 @@ from pathlib import Path
 import numpy as np
 
 from pushtoknow.inference import InferenceConfig, infer_object
+from pushtoknow.models.calibration import DIRECTIONS
 from pushtoknow.models.checkpoint import load_checkpoint
 from pushtoknow.pretrained import pretrained_dir, resolve_model_path
 from pushtoknow.testbed.config import TESTBED_VERSION
@@ -46,6 +47,12 @@ def test_shipped_model_matches_its_recipe():
     assert model.inference.noise_scale >= 1.0
     # the 4 samples of a release's acceleration trust the force more than the steady samples do
     assert 1.0 <= model.inference.dynamic_noise_scale < model.inference.noise_scale
+    # each speed profile keeps its own share of evidence; a constant push, which reveals m only
+    # at fixed μ·m through model error, keeps less of m against μ than a release push does
+    m_vs_mu = DIRECTIONS.index("m_vs_mu")
+    constant, release = (model.inference.evidence_weights_for(p) for p in ("constant", "release"))
+    assert set(model.inference.profile_evidence_weights) == {"constant", "release"}
+    assert constant[m_vs_mu] < release[m_vs_mu]
     assert np.isfinite(model.prior.cov.numpy()).all()
 
 

@@ -71,3 +71,30 @@ def test_shapes_and_weights_are_checked():
         keep_evidence(m, c, m, c[:1], torch.ones(5))
     with pytest.raises(ValueError, match=r"\[0, 1\]"):
         InferenceSettings(evidence_weights=(1.0, 1.0, 1.5, 1.0, 1.0))
+
+
+def test_per_row_weights_act_on_each_row_as_its_own_call():
+    rng = np.random.default_rng(1)
+    m0, c0 = random_belief(rng)
+    m1, c1 = random_belief(rng)
+    rows = torch.as_tensor(rng.uniform(size=(3, 5)), dtype=F64)
+    m, c = keep_evidence(m0, c0, m1, c1, rows)
+    for i in range(3):
+        mi, ci = keep_evidence(m0[i : i + 1], c0[i : i + 1], m1[i : i + 1], c1[i : i + 1], rows[i])
+        torch.testing.assert_close(m[i], mi[0])
+        torch.testing.assert_close(c[i], ci[0])
+    with pytest.raises(ShapeError, match="weights"):
+        keep_evidence(m0, c0, m1, c1, rows[:2])
+
+
+def test_a_profile_without_its_own_weights_uses_the_common_ones():
+    common = (1.0, 0.5, 0.5, 0.5, 0.1)
+    own = (1.0, 0.2, 0.3, 0.3, 0.0)
+    s = InferenceSettings(evidence_weights=common, profile_evidence_weights={"release": own})
+    assert s.evidence_weights_for("release") == own
+    assert s.evidence_weights_for("constant") == common
+    torch.testing.assert_close(s.evidence_weight_table(), torch.tensor([common, own]))
+    with pytest.raises(ValueError, match="unknown speed profile 'fling'"):
+        InferenceSettings(profile_evidence_weights={"fling": own})
+    with pytest.raises(ValueError, match=r"\[0, 1\]"):
+        InferenceSettings(profile_evidence_weights={"release": (1.0, 1.0, 2.0, 1.0, 1.0)})

@@ -57,3 +57,42 @@ def test_dynamic_noise_scale_is_chosen_with_the_weights(tmp_path_factory):
     # the dynamic scale changes the posterior (release pushes have dynamic samples)
     kept = [next(r for r in rs if r["weight"] == 1.0) for rs in by_scale.values()]
     assert len({round(r["nll_log_mu_m"], 6) for r in kept}) == 3
+
+
+def test_each_profiles_weights_are_chosen_in_turn(tmp_path_factory):
+    from pushtoknow.models.checkpoint import load_checkpoint
+    from pushtoknow.testbed.push import PROFILES
+    from pushtoknow.training.calibration import (
+        SequenceCalibrationConfig,
+        calibrate_evidence,
+        run_sequences,
+    )
+
+    model = load_checkpoint(tiny_run(tmp_path_factory)).eval()
+    pt = load_push_tensors(tiny_dataset(tmp_path_factory))
+    cfg = SequenceCalibrationConfig(
+        weights=(0.0, 1.0), profile_rounds=1, num_sigma_points=SIGMA_POINTS
+    )
+    seqs = push_sequences(pt, cfg.max_objects)
+    profiles = pt.action[seqs, 4].long()
+    assert set(profiles.flatten().tolist()) == {0, 1}  # the tiny data holds both profiles
+    rows: list[dict] = []
+    with torch.no_grad():
+        chosen = calibrate_evidence(model, pt, cfg, seed=0, log=rows.append)
+        # a row of the table acts on that profile's pushes only: with release evidence
+        # dropped, a sequence's belief after a release push is its belief before it
+        table = torch.tensor([[1.0] * 5, [0.0] * 5])
+        beliefs = run_sequences(model, pt, seqs, table, model.inference, cfg, seed=0)
+    assert len(rows) == 2 * (1 + len(PROFILES))  # the common scan, then each profile's
+    assert [r["profile"] for r in rows] == ["all"] * 2 + ["constant"] * 2 + ["release"] * 2
+    assert set(chosen.profile_evidence_weights) == set(PROFILES)
+    for name, weights in chosen.profile_evidence_weights.items():
+        assert set(weights) <= {0.0, 1.0}
+        # each chosen weight is the best of its profile's scan, per direction
+        scan = [r for r in rows if r["profile"] == name]
+        for d, w in zip(DIRECTIONS, weights, strict=True):
+            assert w == min(scan, key=lambda r: r[f"nll_{d}"])["weight"]
+    for j in range(1, seqs.shape[1]):
+        released = profiles[:, j] == 1
+        torch.testing.assert_close(beliefs[j][0][released], beliefs[j - 1][0][released])
+        assert not torch.allclose(beliefs[j][0][~released], beliefs[j - 1][0][~released])

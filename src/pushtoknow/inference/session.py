@@ -307,7 +307,7 @@ class ObjectEstimator:
                 )
                 mean, cov, _ = filt.update(mean, cov, z, ctx, noise)
             poses.append(mean[0, :3].numpy().copy())
-        weights = torch.tensor(self.model.inference.evidence_weights)
+        weights = torch.tensor(self.model.inference.evidence_weights_for(rec.push.profile))
         param_mean, param_cov = keep_evidence(
             self.param_mean[None], self.param_cov[None], mean[:, 3:], cov[:, 3:, 3:], weights
         )

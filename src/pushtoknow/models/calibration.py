@@ -49,7 +49,8 @@ def keep_evidence(
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """Belief after a push keeping `weights` (K,) of its evidence per basis direction.
 
-    mean0, mean1: (B, K) the push's prior and the filter's posterior; cov0, cov1: (B, K, K).
+    mean0, mean1: (B, K) the push's prior and the filter's posterior; cov0, cov1: (B, K, K);
+    weights (K,) for every row, or (B, K) per row.
     Returns mean (B, K), cov (B, K, K), symmetric positive semi-definite by construction.
     """
     k = len(PARAM_NAMES)
@@ -57,7 +58,10 @@ def keep_evidence(
     expect_shape(cov0, "cov0", [("B", b), ("K", k), ("K", k)])
     expect_shape(mean1, "mean1", [("B", b), ("K", k)])
     expect_shape(cov1, "cov1", [("B", b), ("K", k), ("K", k)])
-    expect_shape(weights, "weights", [("K", k)])
+    if weights.dim() == 1:
+        expect_shape(weights, "weights", [("K", k)])
+    else:
+        expect_shape(weights, "weights", [("B", b), ("K", k)])
     r = evidence_basis().to(mean0)
     w = weights.to(mean0)
     y0, y1 = mean0 @ r.T, mean1 @ r.T

@@ -32,6 +32,7 @@ from pushtoknow.models.learned import (
     build_learned_models,
 )
 from pushtoknow.models.networks import VisNet, VisNetConfig
+from pushtoknow.testbed.push import PROFILES
 
 CHECKPOINT_FORMAT = "pushtoknow-checkpoint"
 CHECKPOINT_VERSION = 2  # 2: m, μ and I_z normalised through their logarithm (common.params)
@@ -100,7 +101,9 @@ class InferenceSettings(Config):
     (prediction runs at every sample); noise_scale: factor on the learned R
     (dynamic_noise_scale: on the samples of a push's dynamic phase, None: the same);
     evidence_weights: the share of each push's evidence the parameter belief keeps, per
-    direction of `models.calibration.DIRECTIONS` (1: the filter's posterior as it is)."""
+    direction of `models.calibration.DIRECTIONS` (1: the filter's posterior as it is);
+    profile_evidence_weights: the same for pushes of a named speed profile, where its model
+    errors differ (`evidence_weights_for`)."""
 
     update_every: int = Field(1, ge=1)
     noise_scale: float = Field(1.0, gt=0)
@@ -109,6 +112,9 @@ class InferenceSettings(Config):
     )
     num_sigma_points: int = Field(100, ge=10)
     evidence_weights: tuple[float, float, float, float, float] = (1.0, 1.0, 1.0, 1.0, 1.0)
+    profile_evidence_weights: dict[str, tuple[float, float, float, float, float]] = Field(
+        default_factory=dict, description="per speed profile; absent: evidence_weights"
+    )
 
     @field_validator("evidence_weights")
     @classmethod
@@ -116,6 +122,23 @@ class InferenceSettings(Config):
         if not all(0.0 <= w <= 1.0 for w in v):
             raise ValueError(f"evidence weights must lie in [0, 1], got {list(v)}")
         return v
+
+    @field_validator("profile_evidence_weights")
+    @classmethod
+    def _known_profiles(cls, v):
+        for name, weights in v.items():
+            if name not in PROFILES:
+                raise ValueError(f"unknown speed profile {name!r}; choose from {list(PROFILES)}")
+            cls._in_unit_interval(weights)
+        return v
+
+    def evidence_weights_for(self, profile: str) -> tuple[float, float, float, float, float]:
+        """The evidence weights of a push with speed profile `profile`."""
+        return self.profile_evidence_weights.get(profile, self.evidence_weights)
+
+    def evidence_weight_table(self) -> torch.Tensor:
+        """(P, K) evidence weights per speed profile, rows in `testbed.push.PROFILES` order."""
+        return torch.tensor([self.evidence_weights_for(p) for p in PROFILES])
 
 
 @dataclass

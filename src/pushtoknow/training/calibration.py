@@ -7,7 +7,10 @@ of the true parameters is measured in each direction of `models.calibration.DIRE
 every push; each direction takes the weight with the lowest mean NLL over all pushes. With
 `dynamic_noise_scales`, the R scale on the samples of a push's dynamic phase
 (`InferenceSettings.dynamic_noise_scale`) is chosen with them: the candidate whose best weights
-give the lowest NLL summed over the directions. The choice is made on validation objects only
+give the lowest NLL summed over the directions. With `profile_rounds`, each speed profile's
+weights are then chosen in turn with the others' held (coordinate descent, as many rounds): a
+release push's model errors are not a constant push's, and a policy that mostly chooses one
+profile must not inherit weights set for the mix. The choice is made on validation objects only
 (never on the evaluation's held-out ones).
 """
 
@@ -21,6 +24,7 @@ from pydantic import Field
 from pushtoknow.common.config import Config
 from pushtoknow.models.calibration import DIRECTIONS, evidence_basis, keep_evidence
 from pushtoknow.models.checkpoint import InferenceSettings, TrainedModel
+from pushtoknow.testbed.push import PROFILES
 from pushtoknow.training.data import PushTensors
 from pushtoknow.training.end_to_end import run_window
 
@@ -31,6 +35,12 @@ class SequenceCalibrationConfig(Config):
         (), description="candidate R scales for dynamic samples; empty: R's calibrated scale"
     )
     max_objects: int = Field(40, ge=2, description="validation objects used")
+    profile_rounds: int = Field(
+        0,
+        ge=0,
+        description="rounds of per-profile weight choice after the common one (0: one set of "
+        "weights for every speed profile)",
+    )
     num_sigma_points: int = Field(32, ge=10)
     init_pose_std: tuple[float, float, float] = (1e-3, 1e-3, 0.01)
 
@@ -38,7 +48,7 @@ class SequenceCalibrationConfig(Config):
 def push_sequences(pt: PushTensors, max_objects: int) -> torch.Tensor:
     """(N objects, P pushes) row indices of `pt`: each object's pushes in recorded order, the
     same number P (the smallest any object has) for all."""
-    rows: dict[int, list[int]] = {}
+    rows: dict[int, list[tuple[int, int]]] = {}
     for i, (o, k) in enumerate(zip(pt.object_index.tolist(), pt.push_index.tolist())):
         rows.setdefault(o, []).append((k, i))
     seqs = [[i for _, i in sorted(v)] for _, v in sorted(rows.items())][:max_objects]
@@ -56,7 +66,10 @@ def run_sequences(
     cfg: SequenceCalibrationConfig,
     seed: int,
 ) -> list[tuple[torch.Tensor, torch.Tensor]]:
-    """Parameter beliefs (mean (N, K), cov (N, K, K)) after each push of each sequence."""
+    """Parameter beliefs (mean (N, K), cov (N, K, K)) after each push of each sequence.
+
+    weights: (K,) evidence weights for every push, or (P, K) per speed profile (`PROFILES`
+    order)."""
     gen = torch.Generator().manual_seed(seed)
     filt = model.build_filter(
         cfg.num_sigma_points, settings.noise_scale, settings.dynamic_noise_scale
@@ -66,6 +79,7 @@ def run_sequences(
     mean_par = model.prior.mean.expand(n, k).clone()
     cov_par = model.prior.cov.expand(n, k, k).clone()
     pose_std = torch.tensor(cfg.init_pose_std)
+    table = weights.expand(len(PROFILES), k) if weights.dim() == 1 else weights
     out = []
     for j in range(p):
         push = seqs[:, j]
@@ -79,7 +93,8 @@ def run_sequences(
             model.vision_only, settings.update_every,
         ):  # fmt: skip
             pass
-        mean_par, cov_par = keep_evidence(mean_par, cov_par, mean[:, 3:], cov[:, 3:, 3:], weights)
+        kept = table[pt.action[push, 4].long()]
+        mean_par, cov_par = keep_evidence(mean_par, cov_par, mean[:, 3:], cov[:, 3:, 3:], kept)
         out.append((mean_par, cov_par))
     return out
 
@@ -107,20 +122,26 @@ def calibrate_evidence(
         model.inference.model_copy(update={"dynamic_noise_scale": float(d)})
         for d in cfg.dynamic_noise_scales
     ]
-    total = len(cfg.weights) * len(candidates)
+    present = sorted(set(val.action[seqs.flatten(), 4].long().tolist()))
+    total = len(cfg.weights) * (len(candidates) + cfg.profile_rounds * len(present))
     task = progress.add_task("sequence calibration", total=total) if progress else None
-    best_total, best = math.inf, model.inference
-    for settings in candidates:
+
+    def scan(settings: InferenceSettings, table: torch.Tensor, profile: int | None):
+        """(lowest NLL (K,), the weight index reaching it (K,)) over `cfg.weights`, applied to
+        every profile (None) or to row `profile` of `table`."""
         nll = []
         for w in cfg.weights:
-            weights = torch.full((5,), float(w))
-            beliefs = run_sequences(model, val, seqs, weights, settings, cfg, seed)
+            trial = torch.full((5,), float(w)) if profile is None else table.clone()
+            if profile is not None:
+                trial[profile] = float(w)
+            beliefs = run_sequences(model, val, seqs, trial, settings, cfg, seed)
             per_push = torch.stack([direction_nll(m, c, truth).mean(0) for m, c in beliefs])
             nll.append(per_push.mean(0))  # (K,) mean over pushes and objects
             if log:
                 log(
                     {
                         "dynamic_noise_scale": settings.dynamic_noise_scale or "",
+                        "profile": "all" if profile is None else PROFILES[profile],
                         "weight": w,
                         "pushes": seqs.shape[1],
                         "objects": seqs.shape[0],
@@ -129,9 +150,23 @@ def calibrate_evidence(
                 )
             if progress:
                 progress.advance(task)
-        lowest, index = torch.stack(nll).min(0)
+        return torch.stack(nll).min(0)
+
+    best_total, best = math.inf, model.inference
+    for settings in candidates:
+        lowest, index = scan(settings, torch.empty(0), None)
         if float(lowest.sum()) < best_total:
             best_total = float(lowest.sum())
             chosen = tuple(float(cfg.weights[i]) for i in index.tolist())
             best = settings.model_copy(update={"evidence_weights": chosen})
+    if cfg.profile_rounds:
+        rows: dict[int, tuple[float, ...]] = {p: best.evidence_weights for p in present}
+        table = best.evidence_weight_table()
+        for _ in range(cfg.profile_rounds):
+            for p in present:
+                rows[p] = tuple(float(cfg.weights[i]) for i in scan(best, table, p)[1].tolist())
+                table[p] = torch.tensor(rows[p])
+        best = best.model_copy(
+            update={"profile_evidence_weights": {PROFILES[p]: w for p, w in rows.items()}}
+        )
     return best
