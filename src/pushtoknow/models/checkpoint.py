@@ -136,9 +136,9 @@ class InferenceSettings(Config):
         """The evidence weights of a push with speed profile `profile`."""
         return self.profile_evidence_weights.get(profile, self.evidence_weights)
 
-    def evidence_weight_table(self) -> torch.Tensor:
+    def evidence_weight_table(self, dtype: torch.dtype = torch.float32) -> torch.Tensor:
         """(P, K) evidence weights per speed profile, rows in `testbed.push.PROFILES` order."""
-        return torch.tensor([self.evidence_weights_for(p) for p in PROFILES])
+        return torch.tensor([self.evidence_weights_for(p) for p in PROFILES], dtype=dtype)
 
 
 @dataclass

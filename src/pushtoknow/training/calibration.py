@@ -68,8 +68,7 @@ def run_sequences(
 ) -> list[tuple[torch.Tensor, torch.Tensor]]:
     """Parameter beliefs (mean (N, K), cov (N, K, K)) after each push of each sequence.
 
-    weights: (K,) evidence weights for every push, or (P, K) per speed profile (`PROFILES`
-    order)."""
+    weights: (P, K) evidence weights per speed profile (`PROFILES` order)."""
     gen = torch.Generator().manual_seed(seed)
     filt = model.build_filter(
         cfg.num_sigma_points, settings.noise_scale, settings.dynamic_noise_scale
@@ -79,7 +78,6 @@ def run_sequences(
     mean_par = model.prior.mean.expand(n, k).clone()
     cov_par = model.prior.cov.expand(n, k, k).clone()
     pose_std = torch.tensor(cfg.init_pose_std)
-    table = weights.expand(len(PROFILES), k) if weights.dim() == 1 else weights
     out = []
     for j in range(p):
         push = seqs[:, j]
@@ -93,7 +91,7 @@ def run_sequences(
             model.vision_only, settings.update_every,
         ):  # fmt: skip
             pass
-        kept = table[pt.action[push, 4].long()]
+        kept = weights[pt.action[push, 4].long()]
         mean_par, cov_par = keep_evidence(mean_par, cov_par, mean[:, 3:], cov[:, 3:, 3:], kept)
         out.append((mean_par, cov_par))
     return out
@@ -126,14 +124,13 @@ def calibrate_evidence(
     total = len(cfg.weights) * (len(candidates) + cfg.profile_rounds * len(present))
     task = progress.add_task("sequence calibration", total=total) if progress else None
 
-    def scan(settings: InferenceSettings, table: torch.Tensor, profile: int | None):
-        """(lowest NLL (K,), the weight index reaching it (K,)) over `cfg.weights`, applied to
-        every profile (None) or to row `profile` of `table`."""
+    def scan(settings: InferenceSettings, table: torch.Tensor, rows: list[int], label: str):
+        """(lowest NLL (K,), the weight index reaching it (K,)) over `cfg.weights`, each put in
+        `rows` of `table` (P, K), the other rows held."""
         nll = []
         for w in cfg.weights:
-            trial = torch.full((5,), float(w)) if profile is None else table.clone()
-            if profile is not None:
-                trial[profile] = float(w)
+            trial = table.clone()
+            trial[rows] = float(w)
             beliefs = run_sequences(model, val, seqs, trial, settings, cfg, seed)
             per_push = torch.stack([direction_nll(m, c, truth).mean(0) for m, c in beliefs])
             nll.append(per_push.mean(0))  # (K,) mean over pushes and objects
@@ -141,7 +138,7 @@ def calibrate_evidence(
                 log(
                     {
                         "dynamic_noise_scale": settings.dynamic_noise_scale or "",
-                        "profile": "all" if profile is None else PROFILES[profile],
+                        "profile": label,
                         "weight": w,
                         "pushes": seqs.shape[1],
                         "objects": seqs.shape[0],
@@ -152,21 +149,25 @@ def calibrate_evidence(
                 progress.advance(task)
         return torch.stack(nll).min(0)
 
+    # float64 tables hold the grid's weights exactly, so the chosen ones are its values
+    grid = torch.tensor(cfg.weights, dtype=torch.float64)
+    every = list(range(len(PROFILES)))
     best_total, best = math.inf, model.inference
     for settings in candidates:
-        lowest, index = scan(settings, torch.empty(0), None)
+        lowest, index = scan(
+            settings, torch.zeros(len(PROFILES), 5, dtype=grid.dtype), every, "all"
+        )
         if float(lowest.sum()) < best_total:
             best_total = float(lowest.sum())
-            chosen = tuple(float(cfg.weights[i]) for i in index.tolist())
-            best = settings.model_copy(update={"evidence_weights": chosen})
+            best = settings.model_copy(update={"evidence_weights": tuple(grid[index].tolist())})
     if cfg.profile_rounds:
-        rows: dict[int, tuple[float, ...]] = {p: best.evidence_weights for p in present}
-        table = best.evidence_weight_table()
+        table = best.evidence_weight_table(grid.dtype)
         for _ in range(cfg.profile_rounds):
             for p in present:
-                rows[p] = tuple(float(cfg.weights[i]) for i in scan(best, table, p)[1].tolist())
-                table[p] = torch.tensor(rows[p])
+                table[p] = grid[scan(best, table, [p], PROFILES[p])[1]]
         best = best.model_copy(
-            update={"profile_evidence_weights": {PROFILES[p]: w for p, w in rows.items()}}
+            update={
+                "profile_evidence_weights": {PROFILES[p]: tuple(table[p].tolist()) for p in present}
+            }
         )
     return best
