@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from pushtoknow.common.params import ObjectParams, normalise_params
+from pushtoknow.common.params import ObjectParams, normalise_params, space_scale
 from pushtoknow.identification.config import IdentifyConfig
 from pushtoknow.identification.fit import identify
 from pushtoknow.identification.prior import fit_transform, prior_moments
@@ -56,8 +56,7 @@ def test_feasible_keeps_the_com_inside_and_the_inertia_possible():
 def test_fit_recovers_the_truth_within_its_intervals():
     """A constant and a release push of an off-centre object: every parameter's truth lies in
     its 90% interval, μ·m within 2%, the CoM within 1.5 mm, m within 10%."""
-    spec = ObjectSpec("rect2", ObjectParams(0.7, 0.45, 0.012, -0.008, 1.2e-3))
-    records = simulate_pushes(spec, ["constant", "release"], seed=3, config=SHORT, pose_noise=NOISE)
+    spec, records = _off_centre_pushes()
     res = identify(records, _scene(spec), CFG, seed=0)
     truth = spec.params.as_array()
     inside = (res.lower <= truth) & (truth <= res.upper)
@@ -85,6 +84,51 @@ def test_centred_constant_push_leaves_inertia_at_the_prior_width():
     # the prior's 90% interval of I_z in SI, for comparison
     assert res.upper[i] - res.lower[i] > 0.9e-3
     assert abs(res.mu_m / 0.25 - 1) < 0.02
+
+
+def _off_centre_pushes():
+    spec = ObjectSpec("rect2", ObjectParams(0.7, 0.45, 0.012, -0.008, 1.2e-3))
+    records = simulate_pushes(spec, ["constant", "release"], seed=3, config=SHORT, pose_noise=NOISE)
+    return spec, records
+
+
+def test_a_poor_fit_keeps_mass_and_inertia_at_the_prior_width_and_covers_the_truth():
+    """Pose noise 3 times the assumed: no φ brings the misfit to the noise level (χ² ≈ 5). The
+    poor-fit rule raises the noise to the misfit's, so every truth stays inside its interval,
+    and m at fixed μ·m and I_z keep the prior's width (a Laplace width on m would be ~10 times
+    narrower: m is otherwise found within 10%)."""
+    spec, _ = _off_centre_pushes()
+    noise = (3 * CFG.position_noise, 3 * CFG.angle_noise)
+    records = simulate_pushes(spec, ["constant", "release"], seed=3, config=SHORT, pose_noise=noise)
+    res = identify(records, _scene(spec), CFG, seed=0)
+    truth = spec.params.as_array()
+    assert res.poor_fit and res.chi2 > 2 * CFG.restart_chi2
+    assert any("poor" in n for n in res.notes)
+    assert ((res.lower <= truth) & (truth <= res.upper)).all(), (res.lower, truth, res.upper)
+    t = fit_transform()
+    _, p_z = prior_moments()
+    p_u, cov_u = t @ p_z @ t.T, t @ res.cov_norm @ t.T
+    # m at fixed μ·m: at least the prior's width given μ·m exactly; I_z: the prior's width
+    # and the floor, about the prior's estimate
+    assert cov_u[1, 1] >= (p_u[1, 1] - p_u[0, 1] ** 2 / p_u[0, 0]) * (1 - 1e-9)
+    floor = (CFG.inertia_floor / space_scale()[4]) ** 2
+    assert res.cov_norm[4, 4] >= (p_z[4, 4] + floor) * (1 - 1e-9)
+    assert abs(res.mu_m / (0.7 * 0.45) - 1) < 0.05
+
+
+def test_the_coarse_stage_runs_on_poor_fits_and_restores_the_noise_model():
+    """With `restart_chi2` below any fit's χ², every fit counts as poor: the coarse-to-fine
+    descent runs (more rollouts) and what it returns is judged under the true pose noise, so
+    the reported χ² is no worse than without the stage."""
+    spec, records = _off_centre_pushes()
+    strict = CFG.model_copy(update={"restart_chi2": 0.05, "refine_starts": 1})
+    with_stage = identify(records, _scene(spec), strict, seed=0)
+    without = identify(
+        records, _scene(spec), strict.model_copy(update={"coarse_pose_factor": 1.0}), seed=0
+    )
+    assert with_stage.rollouts > without.rollouts
+    assert with_stage.chi2 <= without.chi2 * 1.02
+    assert with_stage.chi2 < 3.0  # the true noise, not the coarse stage's 10-fold pose noise
 
 
 def test_laplace_posterior_keeps_flat_directions_at_the_prior():

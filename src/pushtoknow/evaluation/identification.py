@@ -101,6 +101,7 @@ def run_identification_benchmark(
         "coverage90": coverage(z, 0.9),
         "coverage68": coverage(z, 0.68),
         "unidentified": unidentified,
+        "poor_fits": int(sum(r["poor_fit"] for r in rows)),
         "seconds_per_object": {
             "median": float(np.median([r["seconds"] for r in rows])),
             "max": float(np.max([r["seconds"] for r in rows])),

@@ -53,6 +53,7 @@ from pushtoknow.evaluation.metrics import (
     nrmse,
     product_nrmse,
 )
+from pushtoknow.identification.config import IdentifyConfig
 from pushtoknow.testbed.objects import load_object_spec
 
 PRIOR = "prior-mean"
@@ -312,13 +313,17 @@ def _oracle_run(
     cache: Path,
 ) -> MethodRun:
     """The oracle row, from `cache` when it was computed on the same pushes (actions and
-    recorded tracks), objects, seed and testbed settings: it depends on nothing else."""
+    recorded tracks), objects, seed, testbed settings and identification settings: it depends
+    on nothing else."""
     from pushtoknow.evaluation.identification import oracle_run
 
     h = hashlib.sha256()
     for a in (base.push_actions, base.push_tracks):
         h.update(np.ascontiguousarray(a).tobytes())
-    h.update(json.dumps([objects, seed, sim_config.model_dump(mode="json")]).encode())
+    identify_settings = IdentifyConfig().model_dump(exclude={"workers"})
+    h.update(
+        json.dumps([objects, seed, sim_config.model_dump(mode="json"), identify_settings]).encode()
+    )
     key = h.hexdigest()[:16]
     f = _load_npz(cache, key)
     if f is not None:

@@ -264,8 +264,9 @@ def identification_markdown(reports: list[dict], commands: list[str]) -> str:
         *[f"    {c}" for c in commands],
         "",
         "| pushes | objects | " + " | ".join(keys) + " | μ·m rel. error median / max (≤ 2 %) "
-        "| cov90 " + " / ".join(keys[:-1]) + " | not identified | s/object median (max) |",
-        "|" + "---|" * (len(keys) + 6),
+        "| cov90 " + " / ".join(keys[:-1]) + " | not identified | poor fits "
+        "| s/object median (max) | rollouts/object median |",
+        "|" + "---|" * (len(keys) + 8),
     ]
     for r in reports:
         rel = r["mu_m_relative_error"]
@@ -277,13 +278,17 @@ def identification_markdown(reports: list[dict], commands: list[str]) -> str:
             + " | ".join(f"{r['nrmse'][k]:.3f}" for k in keys)
             + f" | {100 * rel['median']:.2f} % / {100 * rel['max']:.2f} % "
             f"({100 * rel['share_within_2pct']:.0f} % within) | {cov} | {unid} | "
-            f"{secs['median']:.1f} ({secs['max']:.1f}) |"
+            f"{r['poor_fits']} | {secs['median']:.1f} ({secs['max']:.1f}) | "
+            f"{r['rollouts_per_object']['median']:.0f} |"
         )
     rows += [
         "",
         "Not identified: the objects whose interval on that parameter kept the prior's width "
         "(signed by the direction in the fit's coordinates). With constant pushes only, m at "
-        "fixed μ·m and I_z stay at the prior by construction (docs/DESIGN.md §10, §12).",
+        "fixed μ·m and I_z stay at the prior by construction (docs/DESIGN.md §10, §12). Poor "
+        "fits: reduced χ² still above `restart_chi2` after every start and the coarse-to-fine "
+        "descent; their noise is raised to the misfit's and m at fixed μ·m and I_z keep the "
+        "prior's width (docs/DESIGN.md §12). A rollout replays one candidate φ over all pushes.",
     ]
     return "\n".join(rows)
 
