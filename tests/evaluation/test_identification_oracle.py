@@ -115,6 +115,15 @@ def test_the_oracle_row_is_cached_by_the_pushes_it_replays(tmp_path, monkeypatch
     assert len(calls) == 2 and other.mean[0, 0, 0] == 2.0
     suite._oracle_run(base(1.0), ["o"], SHORT, 1, 1, None, cache)  # another seed
     assert len(calls) == 3
+    suite._oracle_run(base(1.0), ["o"], SHORT, 1, 1, None, cache)
+    assert len(calls) == 3
+    # other identification settings: recomputed
+    from pushtoknow.identification.config import IdentifyConfig
+
+    changed = IdentifyConfig().model_copy(update={"restart_chi2": 2.0})
+    monkeypatch.setattr(suite, "IdentifyConfig", lambda: changed)
+    suite._oracle_run(base(1.0), ["o"], SHORT, 1, 1, None, cache)
+    assert len(calls) == 4
 
 
 def test_product_relative_error_of_the_final_estimates():

@@ -313,13 +313,17 @@ def _oracle_run(
     cache: Path,
 ) -> MethodRun:
     """The oracle row, from `cache` when it was computed on the same pushes (actions and
-    recorded tracks), objects, seed, testbed settings and identification settings: it depends
-    on nothing else."""
+    recorded tracks), objects, seed, testbed settings and identification settings and code: it
+    depends on nothing else."""
     from pushtoknow.evaluation.identification import oracle_run
 
     h = hashlib.sha256()
     for a in (base.push_actions, base.push_tracks):
         h.update(np.ascontiguousarray(a).tobytes())
+    from pushtoknow.identification import fit
+
+    # the fit's own code too: a changed algorithm must not reuse the previous rows
+    h.update(Path(fit.__file__).read_bytes())
     identify_settings = IdentifyConfig().model_dump(exclude={"workers"})
     h.update(
         json.dumps([objects, seed, sim_config.model_dump(mode="json"), identify_settings]).encode()

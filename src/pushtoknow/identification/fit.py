@@ -479,12 +479,12 @@ def identify(
             # the pose track weighted as if `coarse_pose_factor` times noisier (a smoother
             # landscape led by the force), then refine under the true weights from there.
             # (Without a noise level, χ² is not yet a measure of fit.)
-            pose = [2, 3, 4]
-            prob.sigmas[pose] *= cfg.coarse_pose_factor
+            true_sigmas = prob.sigmas.copy()
+            prob.sigmas[[2, 3, 4]] *= cfg.coarse_pose_factor
             r_c = prob.residuals(best[0][None])[0]
             report(1)
             u_c, *_ = refine(best[0].copy(), r_c)
-            prob.sigmas[pose] /= cfg.coarse_pose_factor
+            prob.sigmas = true_sigmas
             r_c = prob.residuals(u_c[None])[0]
             report(1)
             fit = refine(u_c, r_c)
@@ -526,6 +526,8 @@ def identify(
         if costs(rt[None], trial[None])[0] < cost:
             u, r = trial, rt
             chi2 = float(np.sum(r[:n] ** 2) / max(n - 5, 1))
+            if poor:
+                fit_chi2 = float(np.sum((r[:n].reshape(-1, 5) * scale) ** 2) / max(n - 5, 1))
         h_data = jac.T @ (w[:, None] * jac) * (1.0 / max(1.0, chi2))
         if quasi_static or poor:
             # quasi-static pushes reveal neither m at fixed μ·m nor I_z (docs/DESIGN.md §10):
@@ -538,22 +540,19 @@ def identify(
         cov_u, lam_d, vecs, flat = laplace_posterior(
             h_data, newton, p_u, cfg.flat_information, cfg.information_scale
         )
-        if not poor:
-            # along a direction the pushes do not reveal, the estimate is the prior's (given
-            # the identified coordinates), as the information dropped there would have it
-            w_u = np.linalg.solve(chol, u - u_prior)
-            for j in np.where(flat)[0]:
-                w_u -= vecs[:, j] * float(vecs[:, j] @ w_u)
-            u = u_prior + chol @ w_u
-        else:
-            # a poor fit keeps its m at fixed μ·m (read from the force of accelerating pushes,
-            # which it still matches roughly; the prior's width says how little it is worth),
-            # but its I_z (read from spin-downs it does not reproduce: up to 13 times off on
-            # validation objects) is replaced by the prior's, given the other coordinates
-            rest = [0, 1, 2, 3]
-            gain = np.linalg.solve(p_u[np.ix_(rest, rest)], p_u[rest, 4])
-            u = u.copy()
-            u[4] = u_prior[4] + gain @ (u[rest] - u_prior[rest])
+        # along a direction the pushes do not reveal, the estimate is the prior's (given the
+        # identified coordinates), as the information dropped there would have it
+        fit_log_mass = u[1]
+        w_u = np.linalg.solve(chol, u - u_prior)
+        for j in np.where(flat)[0]:
+            w_u -= vecs[:, j] * float(vecs[:, j] @ w_u)
+        u = u_prior + chol @ w_u
+        if poor and not quasi_static:
+            # a poor fit keeps its own m at fixed μ·m, read from the force of accelerating
+            # pushes that it still matches roughly (the prior's width says how little it is
+            # worth); its I_z, read from spin-downs it does not reproduce (up to 13 times off
+            # on validation objects), is the prior's
+            u[1] = fit_log_mass
         t_inv = np.linalg.inv(tmat)
         z_map = t_inv @ u
         cov_z = t_inv @ cov_u @ t_inv.T
