@@ -46,7 +46,9 @@ def test_oracle_row_from_the_pushes_a_model_made():
         push_actions=np.stack([r.push.as_array() for r in records])[None],
         push_tracks=np.stack([track_array(r) for r in records])[None],
     )
+    tracks = base.push_tracks.copy()
     run = oracle_run(base, [spec.to_json()], SHORT, seed=0, workers=1, progress=None)
+    np.testing.assert_array_equal(base.push_tracks, tracks)  # the tracking noise goes on a copy
     assert run.mean.shape == (1, 2, 5) and run.zscore.shape == (1, 2, 5)
     assert abs(run.product[0, 1] / (0.4 * 0.6) - 1) < 0.02  # μ·m from one constant push
     assert abs(run.product[0, 0] / (0.4 * 0.6) - 1) > 0.02  # the prior row does not know it
@@ -137,3 +139,17 @@ def test_product_relative_error_of_the_final_estimates():
     r = product_relative_error(run)
     assert abs(r["max"] - 0.1) < 1e-12
     assert abs(r["median"] - 0.055) < 1e-12 and r["share_within_2pct"] == 0.5
+
+
+def test_tracking_noise_has_its_std_and_spares_the_start_pose():
+    from pushtoknow.identification.synthetic import add_tracking_noise
+
+    spec = ObjectSpec("rect1", ObjectParams(0.4, 0.6, 0.0, 0.01, 1.0e-3), name="o")
+    from copy import deepcopy
+
+    record = simulate_pushes(spec, ["constant"], seed=1, config=SHORT)[0]
+    records = [deepcopy(record) for _ in range(40)]
+    add_tracking_noise(records, (5e-4, 0.01), np.random.default_rng(0))
+    noise = np.stack([r.pose - record.pose for r in records])  # (40, T, 3)
+    assert (noise[:, 0] == 0).all()
+    np.testing.assert_allclose(noise[:, 1:].std(axis=(0, 1)), [5e-4, 5e-4, 0.01], rtol=0.1)

@@ -320,10 +320,12 @@ def _oracle_run(
     h = hashlib.sha256()
     for a in (base.push_actions, base.push_tracks):
         h.update(np.ascontiguousarray(a).tobytes())
+    from pushtoknow.evaluation import identification
     from pushtoknow.identification import fit
 
-    # the fit's own code too: a changed algorithm must not reuse the previous rows
-    h.update(Path(fit.__file__).read_bytes())
+    # the code of the fit and of the row too: a changed algorithm must not reuse old rows
+    for module in (fit, identification):
+        h.update(Path(module.__file__).read_bytes())
     identify_settings = IdentifyConfig().model_dump(exclude={"workers"})
     h.update(
         json.dumps([objects, seed, sim_config.model_dump(mode="json"), identify_settings]).encode()

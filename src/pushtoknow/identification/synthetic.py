@@ -68,9 +68,19 @@ def simulate_pushes(
                 push = boundary_push(spec, pose, rng, profile, speed)
             rec = sim.execute(push, rng, render=False)
             if pose_noise is not None:
-                sd = np.array([pose_noise[0], pose_noise[0], pose_noise[1]])
-                rec.pose[1:] += rng.normal(0.0, 1.0, size=rec.pose[1:].shape) * sd
+                add_tracking_noise([rec], pose_noise, rng)
             out.append(rec)
     finally:
         sim.close()
     return out
+
+
+def add_tracking_noise(
+    records: Sequence[PushRecord], pose_noise: tuple[float, float], rng: np.random.Generator
+) -> None:
+    """Add white Gaussian tracking noise of std pose_noise (m, rad) to every pose sample after
+    the first, in place: the testbed records exact poses, a tracker does not, and `identify`
+    weighs the pose track by that noise."""
+    sd = np.array([pose_noise[0], pose_noise[0], pose_noise[1]])
+    for rec in records:
+        rec.pose[1:] += rng.normal(0.0, 1.0, size=rec.pose[1:].shape) * sd
