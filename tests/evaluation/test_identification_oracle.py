@@ -120,10 +120,8 @@ def test_the_oracle_row_is_cached_by_the_pushes_it_replays(tmp_path, monkeypatch
     suite._oracle_run(base(1.0), ["o"], SHORT, 1, 1, None, cache)
     assert len(calls) == 3
     # other identification settings: recomputed
-    from pushtoknow.identification.config import IdentifyConfig
-
-    changed = IdentifyConfig().model_copy(update={"restart_chi2": 2.0})
-    monkeypatch.setattr(suite, "IdentifyConfig", lambda: changed)
+    changed = identification.ORACLE_SETTINGS.model_copy(update={"restart_chi2": 2.0})
+    monkeypatch.setattr(identification, "ORACLE_SETTINGS", changed)
     suite._oracle_run(base(1.0), ["o"], SHORT, 1, 1, None, cache)
     assert len(calls) == 4
 

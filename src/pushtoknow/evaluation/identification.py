@@ -117,6 +117,7 @@ def run_identification_benchmark(
 
 
 ORACLE = "oracle"
+ORACLE_SETTINGS = IdentifyConfig()  # its rollouts run on the caller's `workers`
 
 
 def oracle_run(
@@ -132,7 +133,7 @@ def oracle_run(
     from pushtoknow.identification.prior import prior_moments
     from pushtoknow.testbed.objects import load_object_spec
 
-    cfg = IdentifyConfig()  # its rollouts run on `workers` (the pool below)
+    cfg = ORACLE_SETTINGS
     sim = sim_config.model_copy(update={"render": False})
     z0, p0 = prior_moments()
     m0, s0 = si_moments(z0, p0)

@@ -53,7 +53,6 @@ from pushtoknow.evaluation.metrics import (
     nrmse,
     product_nrmse,
 )
-from pushtoknow.identification.config import IdentifyConfig
 from pushtoknow.testbed.objects import load_object_spec
 
 PRIOR = "prior-mean"
@@ -326,7 +325,7 @@ def _oracle_run(
     # the code of the fit and of the row too: a changed algorithm must not reuse old rows
     for module in (fit, identification):
         h.update(Path(module.__file__).read_bytes())
-    identify_settings = IdentifyConfig().model_dump(exclude={"workers"})
+    identify_settings = identification.ORACLE_SETTINGS.model_dump(exclude={"workers"})
     h.update(
         json.dumps([objects, seed, sim_config.model_dump(mode="json"), identify_settings]).encode()
     )

@@ -426,6 +426,9 @@ def identify(
         fd = np.asarray(cfg.fd_steps, dtype=np.float64)
         iterations = 0
 
+        def reduced_chi2(r_data: np.ndarray) -> float:
+            return float(np.sum(r_data**2) / max(n - 5, 1))
+
         def refine(u: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, float]:
             """Levenberg–Marquardt from u (residuals r) → (u, r, cost, reduced χ²)."""
             nonlocal iterations
@@ -461,7 +464,7 @@ def identify(
                     or previous - cost < cfg.cost_tolerance
                 ):
                     break
-            return u, r, cost, float(np.sum(r[:n] ** 2) / max(n - 5, 1))
+            return u, r, cost, reduced_chi2(r[:n])
 
         best = None
         refined = 0
@@ -491,7 +494,7 @@ def identify(
             if fit[2] < best[2]:
                 best, coarse = fit, True
         u, r, cost, chi2 = best
-        poor, fit_chi2 = False, chi2
+        poor, raised = False, np.ones(5)  # raised: the poor-fit rule's factors on the noise
         if noise_unknown:
             # the recording has no noise level: each channel group's noise is its misfit at
             # the optimum (force, position, angle), and the fit is refined once under it
@@ -502,12 +505,12 @@ def identify(
             # optimum the noise model leaves out. As for a recording without a noise level,
             # each channel group's noise is raised to its misfit, counted by its effective
             # number of samples (a systematic misfit runs in long correlated stretches)
-            poor, fit_chi2 = True, chi2
-            scale = np.maximum(misfit_noise_scale(r[:n].reshape(-1, 5), prob.push_lengths), 1.0)
-            prob.sigmas *= scale
-            r = np.concatenate([(r[:n].reshape(-1, 5) / scale).reshape(-1), r[n:]])
+            poor = True
+            raised = np.maximum(misfit_noise_scale(r[:n].reshape(-1, 5), prob.push_lengths), 1.0)
+            prob.sigmas *= raised
+            r = np.concatenate([(r[:n].reshape(-1, 5) / raised).reshape(-1), r[n:]])
             cost = costs(r[None], u[None])[0]
-            chi2 = float(np.sum(r[:n] ** 2) / max(n - 5, 1))
+            chi2 = reduced_chi2(r[:n])
 
         # ---- Laplace at the optimum, combined with the prior
         probe = np.concatenate([u[None] + np.diag(fd), u[None] - np.diag(fd)])
@@ -525,9 +528,9 @@ def identify(
         report(1)
         if costs(rt[None], trial[None])[0] < cost:
             u, r = trial, rt
-            chi2 = float(np.sum(r[:n] ** 2) / max(n - 5, 1))
-            if poor:
-                fit_chi2 = float(np.sum((r[:n].reshape(-1, 5) * scale) ** 2) / max(n - 5, 1))
+            chi2 = reduced_chi2(r[:n])
+        # χ² under the noise the fit was given (before a poor fit's noise was raised)
+        fit_chi2 = reduced_chi2(r[:n].reshape(-1, 5) * raised)
         h_data = jac.T @ (w[:, None] * jac) * (1.0 / max(1.0, chi2))
         if quasi_static or poor:
             # quasi-static pushes reveal neither m at fixed μ·m nor I_z (docs/DESIGN.md §10):
@@ -613,8 +616,8 @@ def identify(
             + (" and a coarse-to-fine descent" if coarse else "")
             + "): a local minimum, or pushes the replay cannot reproduce. Each channel's noise "
             "is raised to its misfit counted by its effective number of samples (force ×"
-            f"{scale[0]:.1f}, position ×{scale[2]:.1f}, angle ×{scale[4]:.1f}), and m at fixed "
-            "μ·m and I_z keep the prior's width about the fit's estimate"
+            f"{raised[0]:.1f}, position ×{raised[2]:.1f}, angle ×{raised[4]:.1f}); m at fixed "
+            "μ·m keeps the fit's estimate at the prior's width, I_z the prior's"
         )
     elif chi2 > cfg.restart_chi2:
         notes.append(
@@ -661,7 +664,7 @@ def identify(
         mu_m_interval=(float(np.exp(log_pm - q * sd_pm)), float(np.exp(log_pm + q * sd_pm))),
         unidentified=unidentified,
         information=lam_d[::-1].copy(),
-        chi2=fit_chi2 if poor else chi2,
+        chi2=fit_chi2,
         rollouts=pool.rollouts - start_rollouts,
         push_rollouts=pool.push_rollouts - start_push,
         iterations=iterations,
