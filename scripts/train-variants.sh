@@ -4,6 +4,9 @@
 # the shipped model's VisNet, so they differ from it only in the model structure and the filter:
 #   vt-addf-black-box, vt-jdf-black-box, v-ddf-black-box: the paper's black-box VT-ADDF, VT-JDF
 #       and V-DDF (configs/variants.yaml: the shipped recipe without its end-to-end stage);
+#   vt-addf-pressure-arm: the shipped recipe with the limit surface's moment arm that of the
+#       support pressure centred at each sigma point's CoM (configs/vt-addf-pressure-arm.yaml; a
+#       candidate not shipped, docs/TRAINING.md);
 #   vt-addf-free-slide: the shipped networks before `dynamic_motion_params: false`
 #       (configs/vt-addf-free-slide.yaml: its dynamic motion network sees μ and I_z/m);
 #   vt-addf-limit-surface: the one before it (configs/vt-addf-limit-surface.yaml: no free slide
@@ -11,7 +14,7 @@
 #   vt-addf-physics-network: the one before that (configs/vt-addf-physics-network.yaml: quasi-static
 #       motion learned by a network).
 # ~8 min each on 2 cores; a finished run is skipped.
-# Usage: bash scripts/train-variants.sh [WORKDIR [NAME ...]]  (default: runs/pretrained, all six)
+# Usage: bash scripts/train-variants.sh [WORKDIR [NAME ...]]  (default: runs/pretrained, all seven)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
@@ -20,7 +23,7 @@ WORK="${1:-runs/pretrained}"
 shift || true
 NAMES=("$@")
 if [ ${#NAMES[@]} -eq 0 ]; then
-    NAMES=(vt-addf-black-box vt-jdf-black-box v-ddf-black-box vt-addf-free-slide
+    NAMES=(vt-addf-black-box vt-jdf-black-box v-ddf-black-box vt-addf-pressure-arm vt-addf-free-slide
         vt-addf-limit-surface vt-addf-physics-network)
 fi
 # simulate skips the shards already written (same settings), so this is cheap when done
@@ -29,7 +32,7 @@ fi
 for name in "${NAMES[@]}"; do
     case "$name" in
         *-black-box) variant="${name%-black-box}"; config=configs/variants.yaml ;;
-        vt-addf-free-slide | vt-addf-limit-surface | vt-addf-physics-network)
+        vt-addf-pressure-arm | vt-addf-free-slide | vt-addf-limit-surface | vt-addf-physics-network)
             variant=vt-addf; config="configs/$name.yaml" ;;
         *) echo "unknown comparison model: $name" >&2; exit 2 ;;
     esac

@@ -2,14 +2,23 @@
 
 import math
 
+import numpy as np
 import pytest
 import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from scipy.optimize import minimize
 from torch.autograd import gradcheck
 
 from pushtoknow.common.errors import ShapeError
-from pushtoknow.models.contact import limit_surface_push, pad_contact, radius_of_gyration
+from pushtoknow.models.contact import (
+    PRESSURE_ARM_FLOOR,
+    PRESSURE_GRID,
+    limit_surface_push,
+    pad_contact,
+    pressure_moment_arm,
+    radius_of_gyration,
+)
 
 F64 = torch.float64
 H = 0.04  # half side of the test square (m)
@@ -169,3 +178,90 @@ def test_mismatched_shapes_are_refused():
             torch.tensor([0.02], dtype=F64),
             *HARD,
         )
+
+
+def _grid_inside_square(half=H):
+    """The points `pressure_moment_arm` loads on a square: the midpoints of its grid."""
+    u = (torch.arange(PRESSURE_GRID, dtype=F64) + 0.5) / PRESSURE_GRID * 2 * half - half
+    gx, gy = torch.meshgrid(u, u, indexing="ij")
+    return torch.stack([gx.reshape(-1), gy.reshape(-1)], -1)
+
+
+def test_pressure_arm_of_a_centred_square_and_disc_is_the_mean_distance():
+    side = 2 * H
+    exact_square = side * (math.sqrt(2) + math.log(1 + math.sqrt(2))) / 6
+    got = pressure_moment_arm(square()[None], torch.zeros(1, 1, 2, dtype=F64)).item()
+    assert got == pytest.approx(exact_square, rel=2e-3)
+    k = torch.arange(360, dtype=F64) * 2 * math.pi / 360
+    disc = 0.05 * torch.stack([k.cos(), k.sin()], -1)
+    got = pressure_moment_arm(disc[None], torch.zeros(1, 1, 2, dtype=F64)).item()
+    assert got == pytest.approx(2 * 0.05 / 3, rel=2e-2)  # a 16-point grid over a disc
+
+
+def _closest_to_uniform_loads(pts: np.ndarray, com) -> np.ndarray:
+    """Reference: shares w ≥ 0 minimising Σ (n w_i − 1)² with Σ w_i = 1 and Σ w_i p_i = com
+    (the testbed's support-load problem), through its convex dual: w_i = max(0, λ·a_i),
+    a_i = (1, p_i / H), with λ minimising Σ ½ max(0, λ·a_i)² − λ·b, by BFGS."""
+    a = np.hstack([np.ones((len(pts), 1)), pts / H])
+    b = np.array([1.0, com[0] / H, com[1] / H])
+
+    def dual(lam):
+        w = np.maximum(0.0, a @ lam)
+        return 0.5 * float(w @ w) - float(lam @ b), a.T @ w - b
+
+    res = minimize(
+        dual,
+        np.array([1.0 / len(pts), 0.0, 0.0]),
+        jac=True,
+        method="BFGS",
+        options={"gtol": 1e-13, "maxiter": 10_000},
+    )
+    w = np.maximum(0.0, a @ res.x)
+    assert np.allclose(a.T @ w, b, atol=1e-9), res.message
+    return w
+
+
+@pytest.mark.parametrize("com", [(0.005, 0.0), (0.012, -0.004), (0.03, 0.02), (-0.025, 0.03)])
+def test_pressure_arm_is_that_of_the_closest_to_uniform_support_loads(com):
+    """Against an independent solver of the same problem on the same points, lifted off where
+    the linear pressure would be negative (the last two CoMs)."""
+    pts = _grid_inside_square().numpy()
+    w = _closest_to_uniform_loads(pts, com)
+    expected = float((w * np.linalg.norm(pts - np.asarray(com), axis=1)).sum())
+    got = pressure_moment_arm(square()[None], torch.tensor([[com]], dtype=F64)).item()
+    assert got == pytest.approx(expected, rel=1e-6)
+
+
+def test_an_off_centre_com_shortens_the_pressure_arm():
+    coms = torch.tensor([[[0.0, 0.0], [0.01, 0.0], [0.02, 0.0], [0.03, 0.0]]], dtype=F64)
+    arms = pressure_moment_arm(square()[None], coms)[0]
+    assert bool((arms[1:] < arms[:-1]).all())
+    assert arms[-1].item() < 0.8 * arms[0].item()
+
+
+def test_a_com_at_the_edge_or_outside_gets_the_floor_arm():
+    floor = PRESSURE_ARM_FLOOR * radius_of_gyration(square()[None]).item()
+    coms = torch.tensor([[[-0.034, 0.034], [0.039, 0.0], [0.2, -0.1]]], dtype=F64)
+    arms = pressure_moment_arm(square()[None], coms)[0]
+    assert arms.tolist() == pytest.approx([floor] * 3, rel=1e-12)
+
+
+def test_pressure_arm_gradient_in_the_com_is_exact():
+    fp = square()[None]
+    com = torch.tensor([[[0.006, -0.011], [0.031, 0.02]]], dtype=F64, requires_grad=True)
+    assert gradcheck(lambda c: pressure_moment_arm(fp, c), (com,), eps=1e-7, atol=1e-6)
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.floats(-0.06, 0.06), st.floats(-0.06, 0.06), st.floats(0.3, 1.0), st.floats(0.0, 3.2))
+def test_pressure_arm_is_finite_and_bounded_for_any_com(cx, cy, aspect, th):
+    """Sigma points may put the CoM anywhere, even outside the outline: ℓ stays positive and
+    within the farthest point of the footprint from the CoM."""
+    c, s = math.cos(th), math.sin(th)
+    fp = square() * torch.tensor([1.0, aspect], dtype=F64)
+    fp = fp @ torch.tensor([[c, s], [-s, c]], dtype=F64)
+    com = torch.tensor([[[cx, cy]]], dtype=F64)
+    arm = pressure_moment_arm(fp[None], com).item()
+    farthest = (fp - com[0]).norm(dim=-1).max().item()
+    assert math.isfinite(arm)
+    assert 0.0 < arm <= farthest + 1e-9

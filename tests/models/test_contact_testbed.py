@@ -7,18 +7,27 @@ import torch
 
 from pushtoknow.geometry.affordances import sample_push_affordances
 from pushtoknow.models.contact import limit_surface_push, radius_of_gyration
-from pushtoknow.models.physics import CONTACT_REACH, CONTACT_SOFTNESS, MOMENT_ARM_RATIO
+from pushtoknow.models.physics import CONTACT_REACH, CONTACT_SOFTNESS, GyrationArm
 from pushtoknow.perception.footprint import footprint_from_mask
 from pushtoknow.testbed.config import SimConfig
 from pushtoknow.testbed.executor import SimulatedExecutor
-from pushtoknow.testbed.objects import load_object_spec
+from pushtoknow.testbed.objects import load_object_spec, novel_objects
 from pushtoknow.testbed.push import Push
 
 F64 = torch.float64
 
 
-def _steps(spec, seed):
-    """(predicted, recorded) steps (T, 3) of two constant pushes of `spec`."""
+def _true_outline(spec, n=64):
+    """The spec's outline, counter-clockwise, resampled evenly by arc length (n, 2)."""
+    ring = spec.footprint.polygon.exterior
+    if not ring.is_ccw:
+        ring = type(ring)(list(ring.coords)[::-1])
+    return np.array([ring.interpolate(t, normalized=True).coords[0] for t in np.arange(n) / n])
+
+
+def _steps(spec, seed, outline="s0", kappa=GyrationArm.initial_ratio):
+    """(predicted, recorded) steps (T, 3) of two constant pushes of `spec`, with the outline
+    seen in S_0 or the true one (`outline` "true")."""
     cfg = SimConfig()
     ex = SimulatedExecutor(spec, cfg, seed=seed, recentre=True)
     rng = np.random.default_rng(seed)
@@ -28,8 +37,11 @@ def _steps(spec, seed):
             view = ex.observe()
             cp, pd = sample_push_affordances(view.s0, ex.camera, 1, rng)
             r = ex.execute(Push(tuple(cp[0]), float(pd[0]), "constant", cfg.push.speed))
-            fp = torch.tensor(footprint_from_mask(r.s0, ex.camera, r.pose[0]), dtype=F64)[None]
-            arm = MOMENT_ARM_RATIO * radius_of_gyration(fp)
+            if outline == "true":
+                fp = torch.tensor(_true_outline(spec), dtype=F64)[None]
+            else:
+                fp = torch.tensor(footprint_from_mask(r.s0, ex.camera, r.pose[0]), dtype=F64)[None]
+            arm = kappa * radius_of_gyration(fp)
             com = torch.tensor([[[spec.params.com_x, spec.params.com_y]]], dtype=F64)
             pose = torch.as_tensor(r.pose, dtype=F64)
             pad = torch.as_tensor(r.pusher, dtype=F64)
@@ -52,19 +64,37 @@ def _steps(spec, seed):
     return np.array(pred), np.concatenate(rec)
 
 
-@pytest.mark.slow
-def test_limit_surface_explains_the_testbeds_quasi_static_pushes():
+def _fit(specs, outline, kappa=GyrationArm.initial_ratio):
+    """Per-step xy error over the steps' xy RMS, and the turn's R², over `specs`."""
     pred, rec = [], []
-    for seed, source in enumerate(("catalogue:100", "catalogue:505", "catalogue:300")):
-        p, r = _steps(load_object_spec(source), seed)
+    for seed, spec in enumerate(specs):
+        p, r = _steps(spec, seed, outline, kappa)
         pred.append(p)
         rec.append(r)
     pred, rec = np.concatenate(pred), np.concatenate(rec)
     xy_err = np.sqrt(((pred[:, :2] - rec[:, :2]) ** 2).sum(1).mean())
     xy_rms = np.sqrt((rec[:, :2] ** 2).sum(1).mean())
     turn_r2 = 1 - ((pred[:, 2] - rec[:, 2]) ** 2).sum() / (rec[:, 2] ** 2).sum()
-    assert xy_err < 0.4 * xy_rms
+    return xy_err / xy_rms, turn_r2
+
+
+@pytest.mark.slow
+def test_limit_surface_explains_the_testbeds_quasi_static_pushes():
+    specs = [load_object_spec(f"catalogue:{i}") for i in (100, 505, 300)]
+    xy_share, turn_r2 = _fit(specs, "s0")
+    assert xy_share < 0.4
     assert turn_r2 > 0.4
+
+
+@pytest.mark.slow
+def test_with_the_true_outline_the_limit_surface_explains_nearly_all_of_it():
+    """What the 64 px S_0 costs: the same step with the true outline leaves a fraction of
+    the error (docs/DESIGN.md §10)."""
+    specs = novel_objects(8, seed=31)
+    xy_share, turn_r2 = _fit(specs, "true", kappa=0.8)  # measured: 0.10, 0.96
+    s0_share, s0_r2 = _fit(specs, "s0")  # measured: 0.24, 0.83
+    assert xy_share < 0.15 and turn_r2 > 0.9
+    assert xy_share < 0.6 * s0_share and turn_r2 > s0_r2 + 0.05
 
 
 def test_the_models_pad_is_the_testbeds():

@@ -16,7 +16,7 @@ from pushtoknow.models.learned import PushContext, with_pad_track
 from pushtoknow.models.physics import (
     CONTACT_REACH,
     CONTACT_SOFTNESS,
-    MOMENT_ARM_RATIO,
+    GyrationArm,
     PhysicsDynamics,
 )
 from pushtoknow.testbed import fidelity as fid
@@ -32,7 +32,7 @@ SQUARE = torch.tensor([[[-HALF, -HALF], [HALF, -HALF], [HALF, HALF], [-HALF, HAL
 
 def _slide(com=(0.0, 0.0), pad_y=0.0, speed=0.4, mu=0.5, k=1.0, pad_x=-HALF - 0.005):
     """The free slide of the square at the origin released by a pad moving along +x."""
-    ell = MOMENT_ARM_RATIO * radius_of_gyration(SQUARE)
+    ell = GyrationArm.initial_ratio * radius_of_gyration(SQUARE)
     return free_slide(
         torch.zeros(1, 1, 3, dtype=F64),
         torch.tensor([[com]], dtype=F64),
@@ -107,7 +107,7 @@ def test_the_slide_matches_the_testbeds_release_pushes(offset, inertia_scale):
     rec = fid.push_through(spec, offset, "release")
     k_r = int(round(PUSH.release_peak_speed / PUSH.release_accel * SimConfig().tactile.rate_hz))
     fp = torch.tensor(np.asarray(spec.footprint.polygon.exterior.coords)[:-1], dtype=F64)[None]
-    ell = MOMENT_ARM_RATIO * radius_of_gyration(fp)
+    ell = GyrationArm.initial_ratio * radius_of_gyration(fp)
     out = free_slide(
         torch.tensor(rec.pose[k_r], dtype=F64)[None, None],
         torch.zeros(1, 1, 2, dtype=F64),

@@ -18,9 +18,13 @@ DT = 0.1
 
 
 QUASI_STATIC = ["network", "limit-surface"]
+# quasi-static motion and the limit surface's moment arm
+MOTION = [("network", "gyration"), ("limit-surface", "gyration"), ("limit-surface", "pressure")]
 
 
-def physics_config(quasi_static: str = "network", dynamic_motion_params: bool = True):
+def physics_config(
+    quasi_static: str = "network", dynamic_motion_params: bool = True, moment_arm="gyration"
+):
     """tiny_config with the physics structure and hidden layers wide enough that no random
     initialisation leaves a head constant (dead ReLUs)."""
     cfg = tiny_config()
@@ -29,6 +33,7 @@ def physics_config(quasi_static: str = "network", dynamic_motion_params: bool = 
             "structure": "physics",
             "quasi_static": quasi_static,
             "dynamic_motion_params": dynamic_motion_params,
+            "moment_arm": moment_arm,
             "process": cfg.process.model_copy(update={"hidden_dims": (32, 32)}),
             "tac": cfg.tac.model_copy(update={"hidden_dims": (32, 32, 32)}),
         }
@@ -36,10 +41,13 @@ def physics_config(quasi_static: str = "network", dynamic_motion_params: bool = 
 
 
 def physics_models(
-    seed: int = 0, quasi_static: str = "network", dynamic_motion_params: bool = True
+    seed: int = 0,
+    quasi_static: str = "network",
+    dynamic_motion_params: bool = True,
+    moment_arm: str = "gyration",
 ):
     torch.manual_seed(seed)
-    models = build_learned_models(physics_config(quasi_static, dynamic_motion_params))
+    models = build_learned_models(physics_config(quasi_static, dynamic_motion_params, moment_arm))
     for m in models.modules().modules():
         if isinstance(m, torch.nn.Linear):  # tiny nets: make every output depend on its inputs
             torch.nn.init.normal_(m.weight, std=0.8)
@@ -137,9 +145,9 @@ def test_accelerating_pad_adds_a_force_proportional_to_mass(quasi_static):
     assert torch.allclose(f3 - f2, 2 * inertial, rtol=1e-8, atol=1e-10)
 
 
-@pytest.mark.parametrize("quasi_static", QUASI_STATIC)
-def test_quasi_static_motion_never_depends_on_mass_friction_or_inertia(quasi_static):
-    _, models = physics_models(quasi_static=quasi_static)
+@pytest.mark.parametrize(("quasi_static", "moment_arm"), MOTION)
+def test_quasi_static_motion_never_depends_on_mass_friction_or_inertia(quasi_static, moment_arm):
+    _, models = physics_models(quasi_static=quasi_static, moment_arm=moment_arm)
     ctx = context_with_path(steady_path(), 4)
     d1, q1 = models.dynamics(states_with(0.3, 0.4, 0.6e-3), ctx)
     d2, q2 = models.dynamics(states_with(1.1, 0.7, 1.4e-3), ctx)
@@ -181,12 +189,13 @@ def test_kinematic_dynamic_motion_needs_the_physics_structure():
         )
 
 
-@pytest.mark.parametrize("quasi_static", QUASI_STATIC)
-def test_physics_filter_runs_and_has_exact_gradients(quasi_static):
+@pytest.mark.parametrize(("quasi_static", "moment_arm"), MOTION)
+def test_physics_filter_runs_and_has_exact_gradients(quasi_static, moment_arm):
     """A dual filter on the physics models: a step is finite, and the gradient of the
     updated belief with respect to the observation matches finite differences."""
     torch.manual_seed(1)
-    filt = build_filter("dual", models_config=physics_config(quasi_static)).to(F64)
+    config = physics_config(quasi_static, moment_arm=moment_arm)
+    filt = build_filter("dual", models_config=config).to(F64)
     assert isinstance(filt, DualFilter)
     mean, cov = prior(1, F64)
     mean[0, 3:] = 0.1
@@ -215,21 +224,33 @@ def _silence(mlp: torch.nn.Module) -> None:
     torch.nn.init.zeros_(last.bias)
 
 
-def test_limit_surface_motion_is_the_pads_quasi_static_step_plus_the_network():
+@pytest.mark.parametrize("moment_arm", ["gyration", "pressure"])
+def test_limit_surface_motion_is_the_pads_quasi_static_step_plus_the_network(moment_arm):
     """With the networks silenced, Δψ is the limit surface's step of the pad from sample t-1
-    to t, for the footprint in the context, the sigma point's CoM and ℓ = κ √(J/A)."""
-    from pushtoknow.models.contact import limit_surface_push, radius_of_gyration
+    to t, for the footprint in the context, the sigma point's CoM and ℓ = κ √(J/A) or
+    κ × the pressure's mean distance from the CoM."""
+    from pushtoknow.models.contact import (
+        limit_surface_push,
+        pressure_moment_arm,
+        radius_of_gyration,
+    )
 
-    _, models = physics_models(quasi_static="limit-surface")
+    _, models = physics_models(quasi_static="limit-surface", moment_arm=moment_arm)
     _silence(models.dynamics.process_net.quasi_static)
     _silence(models.dynamics.process_net.dynamic)
     ctx = context_with_path(steady_path(), 4)
     states = states_with(0.5, 0.5, 1e-3, com=(0.01, -0.02))
     delta, _ = models.dynamics(states, ctx)
-    arm = models.dynamics.limit_surface.log_ratio.exp() * radius_of_gyration(ctx.footprint)
+    com = torch.tensor([[[0.01, -0.02]]], dtype=F64)
+    if moment_arm == "gyration":
+        base = radius_of_gyration(ctx.footprint)
+    else:
+        base = pressure_moment_arm(ctx.footprint, com)[:, 0]
+        assert base.item() < 0.9 * radius_of_gyration(ctx.footprint).item()  # off-centre CoM
+    arm = models.dynamics.limit_surface.log_ratio.exp() * base
     expected = limit_surface_push(
         states[..., :3],
-        torch.tensor([[[0.01, -0.02]]], dtype=F64),
+        com,
         ctx.pad_window[:, 1],
         ctx.pad_window[:, 2],
         ctx.footprint,
@@ -240,3 +261,11 @@ def test_limit_surface_motion_is_the_pads_quasi_static_step_plus_the_network():
     ).twist
     assert expected[..., 2].abs().item() > 1e-4  # the off-centre CoM turns the square
     assert torch.allclose(delta, expected, rtol=1e-9, atol=1e-12)
+
+
+def test_a_pressure_moment_arm_needs_the_limit_surface():
+    with pytest.raises(ValueError, match="moment_arm: pressure needs quasi_static: limit-surface"):
+        LearnedModelsConfig.model_validate(
+            {**physics_config().model_dump(), "moment_arm": "pressure"}
+        )
+    assert "pressure-arm" in physics_config("limit-surface", moment_arm="pressure").label

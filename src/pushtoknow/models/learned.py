@@ -492,6 +492,12 @@ class LearnedModelsConfig(Config):
         description="limit-surface motion only: a released object's slide to rest through the "
         "limit surface is written down (`models.contact.free_slide`)",
     )
+    moment_arm: Literal["gyration", "pressure"] = Field(
+        "gyration",
+        description="limit-surface motion only: the moment arm ℓ is κ × the footprint's radius "
+        "of gyration (gyration) or κ × the mean distance from the CoM under the support "
+        "pressure centred at it (pressure; `models.contact.pressure_moment_arm`)",
+    )
     dynamic_motion_params: bool = Field(
         True,
         description="physics structure only: the dynamic motion network sees μ and I_z/m "
@@ -507,6 +513,8 @@ class LearnedModelsConfig(Config):
         label: str = self.structure
         if self.quasi_static != "network":
             label = f"{label}-{self.quasi_static}"
+        if self.moment_arm != "gyration":
+            label = f"{label}-{self.moment_arm}-arm"
         if self.free_slide:
             label = f"{label}-free-slide"
         return label if self.dynamic_motion_params else f"{label}-kinematic-dynamic"
@@ -522,6 +530,8 @@ class LearnedModelsConfig(Config):
         crop = self.encoding.crop_size
         if self.quasi_static != "network" and self.structure != "physics":
             raise ValueError("quasi_static: limit-surface needs structure: physics")
+        if self.moment_arm != "gyration" and self.quasi_static != "limit-surface":
+            raise ValueError("moment_arm: pressure needs quasi_static: limit-surface")
         if self.free_slide and self.quasi_static != "limit-surface":
             raise ValueError("free_slide needs quasi_static: limit-surface")
         if not self.dynamic_motion_params and self.structure != "physics":
@@ -588,7 +598,9 @@ def _physics_models(
     tac = PhysicsTacNet(config.tac, physics.GEOM_DIM, physics.INERTIAL_DIM)
     limit_surface = None
     if config.quasi_static == "limit-surface":
-        limit_surface = physics.LimitSurface(config.pad_radius)
+        limit_surface = physics.LimitSurface(
+            config.pad_radius, physics.MOMENT_ARMS[config.moment_arm]
+        )
     return LearnedModels(
         physics.PhysicsDynamics(
             encoding, process, limit_surface, config.free_slide, config.dynamic_motion_params

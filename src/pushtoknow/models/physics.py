@@ -32,6 +32,7 @@ kinematics from `PushContext.pad_kinematics`:
 from __future__ import annotations
 
 import math
+from abc import ABC, abstractmethod
 from dataclasses import dataclass
 
 import torch
@@ -44,6 +45,7 @@ from pushtoknow.models.contact import (
     LimitSurfacePush,
     free_slide,
     limit_surface_push,
+    pressure_moment_arm,
     radius_of_gyration,
 )
 from pushtoknow.models.learned import (
@@ -60,7 +62,6 @@ ACCEL_SCALE = 1.0  # m/s², normalises the pad's acceleration features
 GATE_ACCEL = 0.5  # m/s²: scale of the gate of the dynamic motion term (below)
 CONTACT_REACH = 1e-3  # m: a pad this close to the outline seen in S_0 counts as touching
 CONTACT_SOFTNESS = 5e-4  # m: width of that decision (a 64 px mask is ~1 mm off)
-MOMENT_ARM_RATIO = 0.9  # initial ℓ / radius of gyration (a disc's ℓ is 0.94 of it)
 GEOM_DIM = 19
 DYN_DIM = GEOM_DIM + 5
 INERTIAL_DIM = GEOM_DIM + 1
@@ -169,14 +170,52 @@ def physics_features(
     )
 
 
+class MomentArm(ABC):
+    """How the limit surface's moment arm ℓ depends on the outline and the CoM, before the
+    learned factor κ (`initial_ratio` is κ's starting value)."""
+
+    name: str
+    initial_ratio: float
+
+    @abstractmethod
+    def __call__(self, footprint: torch.Tensor, com: torch.Tensor) -> torch.Tensor:
+        """ℓ / κ (B, S) in m for footprint (B, V, 2) and CoMs com (B, S, 2), object frame."""
+
+
+class GyrationArm(MomentArm):
+    """ℓ / κ = the footprint's radius of gyration about its centroid, whatever the CoM (a
+    disc's uniform-pressure ℓ is 0.94 of it)."""
+
+    name = "gyration"
+    initial_ratio = 0.9
+
+    def __call__(self, footprint: torch.Tensor, com: torch.Tensor) -> torch.Tensor:
+        return radius_of_gyration(footprint)[:, None].expand(com.shape[:2])
+
+
+class PressureArm(MomentArm):
+    """ℓ / κ = Σ w_i ‖p_i − c‖ under the support pressure closest to uniform centred at the
+    CoM (`models.contact.pressure_moment_arm`): an off-centre CoM shortens the arm."""
+
+    name = "pressure"
+    initial_ratio = 1.0
+
+    def __call__(self, footprint: torch.Tensor, com: torch.Tensor) -> torch.Tensor:
+        return pressure_moment_arm(footprint, com)
+
+
+MOMENT_ARMS: dict[str, MomentArm] = {arm.name: arm for arm in (GyrationArm(), PressureArm())}
+
+
 class LimitSurface(nn.Module):
     """Quasi-static pushing of the outline in `context.footprint` (`models.contact`) with a
-    learned moment arm ℓ = κ · radius of gyration; pad_radius (m)."""
+    learned moment arm ℓ = κ · `moment_arm`(footprint, CoM); pad_radius (m)."""
 
-    def __init__(self, pad_radius: float):
+    def __init__(self, pad_radius: float, moment_arm: MomentArm | None = None):
         super().__init__()
         self.pad_radius = float(pad_radius)
-        self.log_ratio = nn.Parameter(torch.tensor(math.log(MOMENT_ARM_RATIO)))
+        self.moment_arm = moment_arm or GyrationArm()
+        self.log_ratio = nn.Parameter(torch.tensor(math.log(self.moment_arm.initial_ratio)))
 
     def forward(
         self, pose: torch.Tensor, com: torch.Tensor, context: PushContext
@@ -187,7 +226,7 @@ class LimitSurface(nn.Module):
             raise ShapeError("limit-surface models need the footprint and the pad's track")
         fp = context.footprint.to(pose.dtype)
         window = context.pad_window.to(pose.dtype)
-        arm = self.log_ratio.exp().to(pose.dtype) * radius_of_gyration(fp)
+        arm = self.log_ratio.exp().to(pose.dtype) * self.moment_arm(fp, com)
         return limit_surface_push(
             pose,
             com,
@@ -208,7 +247,7 @@ class LimitSurface(nn.Module):
             raise ShapeError("the free slide needs the footprint, the pad's track and release")
         pose = states[..., :POSE_DIM]
         fp = context.footprint.to(pose.dtype)
-        arm = self.log_ratio.exp().to(pose.dtype) * radius_of_gyration(fp)
+        arm = self.log_ratio.exp().to(pose.dtype) * self.moment_arm(fp, f.com)
         inertia = denormalise_params(states[..., POSE_DIM:])[..., _I]
         return free_slide(
             pose,
@@ -217,7 +256,7 @@ class LimitSurface(nn.Module):
             context.direction.to(pose.dtype),
             context.release[:, 1].to(pose.dtype),
             f.friction * GRAVITY,
-            inertia / (f.mass * arm[:, None].square()),
+            inertia / (f.mass * arm.square()),
             fp,
             self.pad_radius,
             arm,
