@@ -22,8 +22,8 @@ PTK=.venv/bin/pushtoknow
 if [ "$QUICK" = 1 ]; then
     COMPARED=(vt-addf-black-box)
 else
-    COMPARED=(vt-addf-pressure-arm vt-addf-free-slide vt-addf-limit-surface vt-addf-physics-network
-        vt-addf-black-box vt-jdf-black-box v-ddf-black-box)
+    COMPARED=(vt-addf-free-slide vt-addf-limit-surface vt-addf-physics-network vt-addf-black-box
+        vt-jdf-black-box v-ddf-black-box)
 fi
 bash scripts/train-variants.sh "$WORK" "${COMPARED[@]}"
 

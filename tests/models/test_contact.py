@@ -19,6 +19,7 @@ from pushtoknow.models.contact import (
     pressure_moment_arm,
     radius_of_gyration,
 )
+from pushtoknow.testbed.objects import load_object_spec
 
 F64 = torch.float64
 H = 0.04  # half side of the test square (m)
@@ -232,7 +233,7 @@ def test_pressure_arm_is_that_of_the_closest_to_uniform_support_loads(com):
     assert got == pytest.approx(expected, rel=1e-6)
 
 
-def test_an_off_centre_com_shortens_the_pressure_arm():
+def test_an_off_centre_com_shortens_a_squares_pressure_arm():
     coms = torch.tensor([[[0.0, 0.0], [0.01, 0.0], [0.02, 0.0], [0.03, 0.0]]], dtype=F64)
     arms = pressure_moment_arm(square()[None], coms)[0]
     assert bool((arms[1:] < arms[:-1]).all())
@@ -244,6 +245,20 @@ def test_a_com_at_the_edge_or_outside_gets_the_floor_arm():
     coms = torch.tensor([[[-0.034, 0.034], [0.039, 0.0], [0.2, -0.1]]], dtype=F64)
     arms = pressure_moment_arm(square()[None], coms)[0]
     assert arms.tolist() == pytest.approx([floor] * 3, rel=1e-12)
+
+
+def test_pressure_arm_in_float32_survives_coms_no_pressure_can_carry():
+    """Sigma points of a float32 filter may put the CoM far outside the outline, where the
+    carried set of points is nearly singular (a float32 solve failed on this triangle): the
+    arm stays finite, in float32, and never below the floor."""
+    tri = load_object_spec("catalogue:225").footprint.vertices
+    fp = torch.tensor(np.asarray(tri), dtype=torch.float32)[None]
+    g = torch.linspace(-0.08, 0.08, 80)
+    coms = torch.stack(torch.meshgrid(g, g, indexing="ij"), -1).reshape(1, -1, 2)
+    arms = pressure_moment_arm(fp, coms)
+    assert arms.dtype == torch.float32 and bool(torch.isfinite(arms).all())
+    floor = PRESSURE_ARM_FLOOR * radius_of_gyration(fp.double()).item()
+    assert arms.min().item() == pytest.approx(floor, rel=1e-6)
 
 
 def test_pressure_arm_gradient_in_the_com_is_exact():

@@ -12,7 +12,8 @@ of the motion: quasi-static pushing reveals the CoM and ℓ, not the mass.
 
 ℓ is the limit surface's moment arm; for a uniform pressure it is close to the footprint's
 radius of gyration, so ℓ = κ · √(J/A) with J the polar second moment of the footprint about
-its centroid, A its area and κ a learned scalar.
+its centroid, A its area and κ a learned scalar (`radius_of_gyration`). `pressure_moment_arm`
+gives instead the arm of the support pressure that a given CoM implies.
 """
 
 from __future__ import annotations
@@ -63,10 +64,10 @@ def radius_of_gyration(footprint: torch.Tensor) -> torch.Tensor:
 
 
 PRESSURE_GRID = 16  # points per side of the grid over the footprint's bounding box
-PRESSURE_ITERATIONS = 12  # active-set passes of the lifted-off pressure (converges in ≤ 4)
-PRESSURE_RIDGE = 1e-10  # added to the 3 × 3 normal equations (entries ≥ ~1e-2 inside an outline)
+PRESSURE_ITERATIONS = 32  # active-set passes of the lifted-off pressure (≤ 12 seen on novel shapes)
+PRESSURE_RIDGE = 1e-10  # added to the 3 × 3 normal equations (solved in float64)
 PRESSURE_CENTRE_TOLERANCE = 1e-4  # m: a pressure centred farther from the CoM cannot carry it
-PRESSURE_ARM_FLOOR = 0.3  # ℓ ≥ this × the radius of gyration (a CoM at the outline's edge)
+PRESSURE_ARM_FLOOR = 0.3  # ℓ ≥ this × the radius of gyration, and ℓ of a CoM none can carry
 
 
 def pressure_moment_arm(footprint: torch.Tensor, com: torch.Tensor) -> torch.Tensor:
@@ -78,10 +79,16 @@ def pressure_moment_arm(footprint: torch.Tensor, com: torch.Tensor) -> torch.Ten
     lifted off where it would be negative (w_i = max(0, a + b·p_i), a and b set by Σ w_i = 1
     and Σ w_i p_i = c; the least-squares problem's optimality conditions). p_i: the points of
     a `PRESSURE_GRID`² grid over the bounding box that lie inside the outline. A centred CoM
-    gives ℓ ≈ 0.93 × the radius of gyration, a CoM 3 cm off-centre 0.5–0.7 × (catalogue
-    shapes), which a constant ℓ overstates by up to half. ℓ ≥ `PRESSURE_ARM_FLOOR` × the
-    radius of gyration, which is also the arm of a CoM that no load on the points can carry
-    (outside their hull)."""
+    gives ℓ ≈ 0.93 × the radius of gyration; a CoM 3 cm off-centre between the floor and
+    1.2 × the centred arm on catalogue shapes (rectangles: 0.6–0.8 ×).
+
+    Differentiable in c wherever the grid's points can carry the CoM. A CoM they cannot
+    carry (outside their hull: beyond the outline, or within about half a grid cell of it)
+    gets the floor, `PRESSURE_ARM_FLOOR` × the radius of gyration, which is also a lower
+    bound everywhere: ℓ jumps there, with zero gradient beyond. Solved in float64 whatever
+    the inputs' dtype (a float32 solve of a nearly singular carried set can fail)."""
+    dtype = com.dtype
+    footprint, com = footprint.double(), com.double()
     b, s = com.shape[:2]
     expect_shape(footprint, "footprint", [("B", b), ("V", None), ("2", 2)])
     lo, hi = footprint.amin(1), footprint.amax(1)
@@ -118,7 +125,7 @@ def pressure_moment_arm(footprint: torch.Tensor, com: torch.Tensor) -> torch.Ten
     centre = (load @ pts) / total.clamp_min(1e-12).unsqueeze(-1)  # (B, S, 2)
     carried = (total > 1e-9) & ((centre - com).norm(dim=-1) < PRESSURE_CENTRE_TOLERANCE)
     floor = PRESSURE_ARM_FLOOR * radius_of_gyration(footprint)[:, None]
-    return torch.where(carried, arm, floor).maximum(floor)
+    return torch.where(carried, arm, floor).maximum(floor).to(dtype)
 
 
 def _inside(points: torch.Tensor, footprint: torch.Tensor) -> torch.Tensor:
@@ -180,8 +187,8 @@ def limit_surface_push(
 ) -> LimitSurfacePush:
     """The quasi-static step of sliders at poses (B, S, 3) (x, y, θ of the footprint's frame,
     world) with CoMs com (B, S, 2) (object frame, m) while the pad moves from pad_from to
-    pad_to (B, 2) (world, m); footprint (B, V, 2) (object frame, m); moment_arm ℓ (B,) or
-    (B, S) (m).
+    pad_to (B, 2) (world, m); footprint (B, V, 2) (object frame, m); moment_arm ℓ (B,),
+    (B, 1) or (B, S) (m).
 
     The contact point keeps up with the pad's advance along the normal (the pad's velocity
     form, robust to an outline that is a millimetre off), while the pad touches: weight
@@ -233,7 +240,8 @@ def free_slide(
 
     pose (B, S, 3) and com (B, S, 2) (object frame) at the release; pad (B, 2) the pad's centre
     then and direction (B,) its heading (world); speed (B,) its speed (m/s); friction_accel
-    (B, S) = μ g (m/s²); inertia_ratio (B, S) k = I_z / (m ℓ²); moment_arm ℓ (B,) or (B, S).
+    (B, S) = μ g (m/s²); inertia_ratio (B, S) k = I_z / (m ℓ²); moment_arm ℓ (B,), (B, 1) or
+    (B, S).
 
     At the release the slider moves as the pad pushed it (`limit_surface_push`: a pad that
     touches); then only the table's friction acts, through the same ellipsoidal limit surface:

@@ -179,7 +179,8 @@ class MomentArm(ABC):
 
     @abstractmethod
     def __call__(self, footprint: torch.Tensor, com: torch.Tensor) -> torch.Tensor:
-        """ℓ / κ (B, S) in m for footprint (B, V, 2) and CoMs com (B, S, 2), object frame."""
+        """ℓ / κ (B, S), or (B, 1) when it does not depend on the CoM, in m, for footprint
+        (B, V, 2) and CoMs com (B, S, 2), object frame."""
 
 
 class GyrationArm(MomentArm):
@@ -190,12 +191,12 @@ class GyrationArm(MomentArm):
     initial_ratio = 0.9
 
     def __call__(self, footprint: torch.Tensor, com: torch.Tensor) -> torch.Tensor:
-        return radius_of_gyration(footprint)[:, None].expand(com.shape[:2])
+        return radius_of_gyration(footprint)[:, None]
 
 
 class PressureArm(MomentArm):
     """ℓ / κ = Σ w_i ‖p_i − c‖ under the support pressure closest to uniform centred at the
-    CoM (`models.contact.pressure_moment_arm`): an off-centre CoM shortens the arm."""
+    CoM (`models.contact.pressure_moment_arm`): the arm moves with the CoM."""
 
     name = "pressure"
     initial_ratio = 1.0
