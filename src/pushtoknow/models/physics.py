@@ -227,7 +227,7 @@ class LimitSurface(nn.Module):
             raise ShapeError("limit-surface models need the footprint and the pad's track")
         fp = context.footprint.to(pose.dtype)
         window = context.pad_window.to(pose.dtype)
-        arm = self.log_ratio.exp().to(pose.dtype) * self.moment_arm(fp, com)
+        arm = self.arm(fp, com)
         return limit_surface_push(
             pose,
             com,
@@ -240,6 +240,10 @@ class LimitSurface(nn.Module):
             CONTACT_SOFTNESS,
         )
 
+    def arm(self, footprint: torch.Tensor, com: torch.Tensor) -> torch.Tensor:
+        """ℓ = κ · `moment_arm`(footprint, com) (m), (B, S) or (B, 1)."""
+        return self.log_ratio.exp().to(footprint.dtype) * self.moment_arm(footprint, com)
+
     def slide(self, states: torch.Tensor, f: PhysicsFeatures, context: PushContext) -> torch.Tensor:
         """(B, S, 3): the free slide (`models.contact.free_slide`) of sliders at states
         (B, S, 3 + 5) released by the pad at its window's sample t-1 with the release speed of
@@ -248,7 +252,7 @@ class LimitSurface(nn.Module):
             raise ShapeError("the free slide needs the footprint, the pad's track and release")
         pose = states[..., :POSE_DIM]
         fp = context.footprint.to(pose.dtype)
-        arm = self.log_ratio.exp().to(pose.dtype) * self.moment_arm(fp, f.com)
+        arm = self.arm(fp, f.com)
         inertia = denormalise_params(states[..., POSE_DIM:])[..., _I]
         return free_slide(
             pose,
