@@ -15,11 +15,11 @@ RANKS = {
     "datasets": 3,
     "filters": 3,
     "models": 4,
-    "perception": 4.5,  # the footprint seen in S_0 and VisNet's measurement
+    "perception": 4.5,  # the footprint seen before a push and VisNet's measurement
     "active": 5,
     "baselines": 5,
     "training": 6,
-    "identification": 6.5,  # simulator-in-the-loop fit: common, geometry, testbed, datasets
+    "identification": 6.5,  # simulator-in-the-loop fit: common … datasets, perception
     "inference": 7,
     "collection": 7.5,  # runs inference to collect training data, trains models
     "reporting": 7.8,  # units, tables, markdown, figures: renders results, imports no producer

@@ -23,6 +23,7 @@ from pushtoknow.evaluation.real import (
     load_real_object,
 )
 from pushtoknow.reporting.real import markdown_table
+from pushtoknow.testbed.executor import View
 from pushtoknow.testbed.push import Push
 from pushtoknow.testbed.sim import PushRecord
 from tiny_training import SIGMA_POINTS, tiny_dataset, tiny_run
@@ -223,10 +224,10 @@ def test_filter_runs_the_pushes_in_order_carrying_the_posterior(report, real_dir
     est = ObjectEstimator(model, real_inference_config(3), seed=0)
     carried, fresh = [], []
     for k, rec in enumerate(real["records"]):
-        est.filter_push(rec, rec.s0, rec.pose[0])
+        est.filter_push(rec, View.before(rec), rec.pose[0])
         carried.append(est.estimate(k + 1).as_dict())
         alone = ObjectEstimator(model, real_inference_config(1), seed=0)
-        alone.filter_push(rec, rec.s0, rec.pose[0])
+        alone.filter_push(rec, View.before(rec), rec.pose[0])
         fresh.append(alone.estimate(1).as_dict())
     assert report.filter["per_push"] == carried
     assert report.filter["per_push"][1:] != fresh[1:]

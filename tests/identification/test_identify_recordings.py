@@ -39,9 +39,11 @@ def test_footprint_from_mask_is_close_to_the_true_one(tiny):
     shape, offset = footprint_from_mask(obj)
     est = footprint_from_shape(shape).polygon
     true = SPEC.footprint.polygon
-    # 64 px images see ~1 cm per pixel: the areas agree to 25%, the centroids to 5 mm
-    assert est.area == pytest.approx(true.area, rel=0.25)
-    assert np.hypot(*offset) < 5e-3
+    # traced on the 256 px mask (2.4 mm pixels) on the object's top plane, smoothed by 5 mm:
+    # measured area −1.1 %, Hausdorff 4.1 mm at the rounded corners (on the 64 px S_0: 5.7 mm)
+    assert est.area == pytest.approx(true.area, rel=0.02)
+    assert est.hausdorff_distance(true) < 5e-3
+    assert np.hypot(*offset) < 1e-3
     scene = replay_scene(obj, "from-mask")
     assert scene.frame_offset == offset and scene.sim_config.render is False
 
@@ -113,14 +115,15 @@ def test_an_inference_run_keeps_its_pushes_for_identify(tmp_path, tiny):
 
 
 def test_identify_with_the_footprint_from_the_mask(tiny):
-    """The mask's footprint is coarse (64 px), yet μ·m comes out within 5% and the CoM is
-    reported in the record's frame (within a centimetre of the truth)."""
+    """With the footprint traced on the outline-resolution mask, μ·m comes out within 5%; the
+    CoM, which one 2 s push barely shows, is reported in the record's frame and within its
+    uncertainty (measured: 10 mm off, z 0.9 and −0.3)."""
     from pushtoknow.identification.config import IdentifyConfig
     from pushtoknow.identification.fit import identify
 
     (obj,) = load_recorded_objects(tiny)
     res = identify(obj.records, replay_scene(obj, "from-mask"), IdentifyConfig(workers=1))
     assert abs(res.mu_m / (0.5 * 0.5) - 1) < 0.05
-    assert np.hypot(*(res.mean[2:4] - SPEC.params.as_array()[2:4])) < 0.01
+    assert np.hypot(*(res.mean[2:4] - SPEC.params.as_array()[2:4])) < 0.015
     z = res.zscore(SPEC.params.as_array())
-    assert np.isfinite(z).all()
+    assert np.isfinite(z).all() and (np.abs(z[2:4]) < 2).all()

@@ -1,5 +1,6 @@
 """The limit-surface step against the testbed: constant pushes of simulated objects, with the
-outline seen in S_0 (as the filter sees it), explain most of the recorded motion."""
+outline the filter sees (`perception.footprint.footprint_seen`), explain most of the recorded
+motion."""
 
 import numpy as np
 import pytest
@@ -8,7 +9,7 @@ import torch
 from pushtoknow.geometry.affordances import sample_push_affordances
 from pushtoknow.models.contact import limit_surface_push, radius_of_gyration
 from pushtoknow.models.physics import CONTACT_REACH, CONTACT_SOFTNESS, GyrationArm
-from pushtoknow.perception.footprint import footprint_from_mask
+from pushtoknow.perception.footprint import footprint_seen
 from pushtoknow.testbed.config import SimConfig
 from pushtoknow.testbed.executor import SimulatedExecutor
 from pushtoknow.testbed.objects import load_object_spec, novel_objects
@@ -27,7 +28,8 @@ def _true_outline(spec, n=64):
 
 def _steps(spec, seed, outline="s0", kappa=GyrationArm.initial_ratio):
     """(predicted, recorded) steps (T, 3) of two constant pushes of `spec`, with the outline
-    seen in S_0 or the true one (`outline` "true")."""
+    `perception.footprint.footprint_seen` gives ("seen"), the one it gives from S_0 alone
+    ("s0") or the true one ("true")."""
     cfg = SimConfig()
     ex = SimulatedExecutor(spec, cfg, seed=seed, recentre=True)
     rng = np.random.default_rng(seed)
@@ -40,7 +42,9 @@ def _steps(spec, seed, outline="s0", kappa=GyrationArm.initial_ratio):
             if outline == "true":
                 fp = torch.tensor(_true_outline(spec), dtype=F64)[None]
             else:
-                fp = torch.tensor(footprint_from_mask(r.s0, ex.camera, r.pose[0]), dtype=F64)[None]
+                mask = r.s0 if outline == "s0" else r.outline_mask
+                fp = footprint_seen(r.s0, r.depth[0], mask, ex.camera, r.pose[0])
+                fp = torch.tensor(fp, dtype=F64)[None]
             arm = kappa * radius_of_gyration(fp)
             com = torch.tensor([[[spec.params.com_x, spec.params.com_y]]], dtype=F64)
             pose = torch.as_tensor(r.pose, dtype=F64)
@@ -81,20 +85,25 @@ def _fit(specs, outline, kappa=GyrationArm.initial_ratio):
 @pytest.mark.slow
 def test_limit_surface_explains_the_testbeds_quasi_static_pushes():
     specs = [load_object_spec(f"catalogue:{i}") for i in (100, 505, 300)]
-    xy_share, turn_r2 = _fit(specs, "s0")
+    # measured 0.33, 0.87 (0.45 on its own for catalogue:100, whose CoM sits 34 mm off-centre:
+    # as much with the true outline, the arm's limit, not the outline's)
+    xy_share, turn_r2 = _fit(specs, "seen")
     assert xy_share < 0.4
-    assert turn_r2 > 0.4
+    assert turn_r2 > 0.75
 
 
 @pytest.mark.slow
-def test_with_the_true_outline_the_limit_surface_explains_nearly_all_of_it():
-    """What the 64 px S_0 costs: the same step with the true outline leaves a fraction of
-    the error (docs/DESIGN.md §10)."""
+def test_the_outline_seen_explains_nearly_all_that_the_true_one_does():
+    """What the outline costs (docs/DESIGN.md §10): the step on the outline the filter sees (the
+    256 px mask, smoothed by 5 mm) leaves about what the true outline leaves; on the 64 px S_0
+    alone, two and a half times as much."""
     specs = novel_objects(8, seed=31)
     xy_share, turn_r2 = _fit(specs, "true", kappa=0.8)  # measured: 0.10, 0.96
-    s0_share, s0_r2 = _fit(specs, "s0")  # measured: 0.24, 0.83
+    seen_share, seen_r2 = _fit(specs, "seen", kappa=0.8)  # measured: 0.105, 0.94
+    s0_share, s0_r2 = _fit(specs, "s0")  # measured: 0.27, 0.81
     assert xy_share < 0.15 and turn_r2 > 0.9
-    assert xy_share < 0.6 * s0_share and turn_r2 > s0_r2 + 0.05
+    assert seen_share < 1.2 * xy_share and seen_r2 > turn_r2 - 0.05
+    assert seen_share < 0.5 * s0_share and seen_r2 > s0_r2 + 0.08
 
 
 def test_the_models_pad_is_the_testbeds():

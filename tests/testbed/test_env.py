@@ -23,6 +23,8 @@ def test_env_step_is_one_push():
     env = PushEnv("catalogue:7", FAST, max_pushes=2)
     obs, info = env.reset(seed=3)
     assert obs["s0"].any()
+    k = FAST.camera.outline_scale
+    assert obs["outline_mask"].reshape(64, k, 64, k).any((1, 3))[obs["s0"] == 1].all()
     obs2, r, term, trunc, info = env.step(np.array([0.25, 0.5, 0.03, 0.0], np.float32))
     rec = info["record"]
     assert len(rec.time) == 16  # 1.5 s at 10 Hz + t = 0

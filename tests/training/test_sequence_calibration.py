@@ -2,6 +2,7 @@
 
 import math
 
+import pytest
 import torch
 
 from pushtoknow.models.calibration import DIRECTIONS
@@ -96,3 +97,38 @@ def test_each_profiles_weights_are_chosen_in_turn(tmp_path_factory):
         released = profiles[:, j] == 1
         torch.testing.assert_close(beliefs[j][0][released], beliefs[j - 1][0][released])
         assert not torch.allclose(beliefs[j][0][~released], beliefs[j - 1][0][~released])
+
+
+def test_a_capped_direction_takes_its_best_allowed_weight(tmp_path_factory):
+    """max_weights bars the weights above a direction's cap; the others choose as before."""
+    from pushtoknow.models.checkpoint import load_checkpoint
+    from pushtoknow.training.calibration import SequenceCalibrationConfig, calibrate_evidence
+
+    model = load_checkpoint(tiny_run(tmp_path_factory)).eval()
+    pt = load_push_tensors(tiny_dataset(tmp_path_factory))
+    weights = (0.0, 0.5, 1.0)
+    free = SequenceCalibrationConfig(weights=weights, num_sigma_points=SIGMA_POINTS)
+    capped = free.model_copy(update={"max_weights": {"com_x": 0.5, "com_y": 0.0}})
+    rows: list[dict] = []
+    with torch.no_grad():
+        a = calibrate_evidence(model, pt, free, seed=0, log=rows.append)
+        b = calibrate_evidence(model, pt, capped, seed=0)
+    nll = {d: [r[f"nll_{d}"] for r in rows] for d in DIRECTIONS}
+    best_x = min(range(2), key=lambda i: nll["com_x"][i])  # the weights 0 and 0.5
+    assert b.evidence_weights[2] == weights[best_x]
+    assert b.evidence_weights[3] == 0.0
+    for k in (0, 1, 4):
+        assert b.evidence_weights[k] == a.evidence_weights[k]
+
+
+def test_max_weights_must_name_a_direction_and_allow_a_weight():
+    from pydantic import ValidationError
+
+    from pushtoknow.training.calibration import SequenceCalibrationConfig
+
+    with pytest.raises(ValidationError, match="unknown direction 'mass'"):
+        SequenceCalibrationConfig(max_weights={"mass": 0.5})
+    with pytest.raises(ValidationError, match=r"com_x = 1.5: a weight lies in \[0, 1\]"):
+        SequenceCalibrationConfig(max_weights={"com_x": 1.5})
+    with pytest.raises(ValidationError, match="below every candidate weight"):
+        SequenceCalibrationConfig(weights=(0.25, 1.0), max_weights={"com_y": 0.1})

@@ -38,8 +38,11 @@ def test_push_tensors(tiny):
     assert len(pt) == 12 and pt.horizon_steps == 31
     assert pt.footprint.shape == (12, FOOTPRINT_VERTICES, 2)
     assert pt.params_norm.abs().max() <= 1.0 + 1e-6
-    # Footprint from S_0 is centred in the object frame and about the right size.
-    assert pt.footprint.mean(1).abs().max() < 0.01
+    # The footprint seen is centred in the object frame (its area centroid at the origin).
+    from shapely.geometry import Polygon
+
+    centroids = np.array([Polygon(f).centroid.coords[0] for f in pt.footprint.numpy()])
+    assert np.abs(centroids).max() < 1e-3
     sub = pt.subset([0, 5])
     assert len(sub) == 2 and torch.equal(sub.pose[1], pt.pose[5])
 

@@ -9,7 +9,7 @@ from above with +y up). Pixel (u, v) has its centre at integer coordinates; pixe
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -63,3 +63,22 @@ class CameraModel:
     def workspace_half_extent(self, z: float = 0.0) -> float:
         """Half the side of the square of table visible in the image (metres)."""
         return 0.5 * min(self.width, self.height) * self.metres_per_pixel(z)
+
+    def scaled(self, k: int) -> CameraModel:
+        """The same camera imaging at k × the resolution (pixels k times smaller)."""
+        if k < 1:
+            raise ValueError(f"a camera's resolution scales by an integer k ≥ 1, not {k}")
+        return replace(self, width=self.width * k, height=self.height * k)
+
+    def resolution_of(self, mask: np.ndarray) -> CameraModel:
+        """The camera that took the 2-D `mask`: this one or `scaled(k)` for an image k × this
+        one's size (integer k ≥ 1). Raises ValueError for any other shape."""
+        shape = np.shape(mask)
+        h, w = shape[:2] if len(shape) >= 2 else (0, 0)
+        k = h // self.height
+        if len(shape) != 2 or k < 1 or (h, w) != (k * self.height, k * self.width):
+            raise ValueError(
+                f"an image of shape {shape} is not an integer multiple of the camera's "
+                f"{(self.height, self.width)}"
+            )
+        return self if k == 1 else self.scaled(k)

@@ -275,21 +275,22 @@ class MitRenderer:
 
     def render(
         self, poses: np.ndarray, pad: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """poses (T, 3), pad (T, 2) → rgb (T, H, W, 3) uint8, depth (T, H, W) float32 m,
-        S_0 (H, W) bool (object mask of frame 0)."""
+        S_0 (H, W) bool (object mask of frame 0) and S_0 at the outline resolution (kH, kW)."""
         c = self.sim.config.camera
         T = len(poses)
         rgb = np.zeros((T, c.height, c.width, 3), np.uint8)
         depth = np.zeros((T, c.height, c.width), np.float32)
         r = self.sim.renderer
-        s0 = None
+        s0 = outline = None
         for k in range(T):
             self.place(poses[k], pad[k])
             if k == 0:
                 s0 = r.segmentation(self.sim.data)
+                outline = self.sim.outline_mask()
             rgb[k], depth[k] = r.rgbd(self.sim.data)
-        return rgb, depth, s0
+        return rgb, depth, s0, outline
 
     def close(self) -> None:
         self.sim.close()
@@ -312,7 +313,7 @@ def convert_push(
     pose = push.object_pose.copy()
     pose[:, :2] += shift
     pusher = push.tip_pose + shift
-    rgb, depth, s0 = renderer.render(pose, pusher)
+    rgb, depth, s0, outline = renderer.render(pose, pusher)
     force = np.asarray(push.force, dtype=np.float64)
     record = PushRecord(
         push=push_action(push, shift, time_scale),
@@ -324,6 +325,7 @@ def convert_push(
         rgb=rgb,
         depth=depth,
         s0=s0,
+        outline_mask=outline,
     )
     mu = push_friction(push)
     attrs = {

@@ -99,6 +99,8 @@ def write_shard(
                 for name in ("time", "pose", "tactile", "force_clean", "pusher"):
                     p.create_dataset(name, data=getattr(r, name), **CHECKSUM)
                 p.create_dataset("s0", data=r.s0, **COMPRESSION)
+                if r.outline_mask is not None:
+                    p.create_dataset("outline_mask", data=r.outline_mask, **COMPRESSION)
                 T, H, W = r.depth.shape
                 p.create_dataset("rgb", data=r.rgb, chunks=(1, H, W, 3), **COMPRESSION)
                 p.create_dataset(
@@ -213,7 +215,10 @@ def read_push(path: Path, grp: h5py.Group, images: bool = True) -> PushRecord:
     if images:
         rgb = _read(path, grp, "rgb")
         depth = _read(path, grp, "depth").astype(np.float32)
-    return PushRecord(push=push, rgb=rgb, depth=depth, s0=_read(path, grp, "s0"), **fields)
+    outline = _read(path, grp, "outline_mask") if "outline_mask" in grp else None
+    return PushRecord(
+        push=push, rgb=rgb, depth=depth, s0=_read(path, grp, "s0"), outline_mask=outline, **fields
+    )
 
 
 def read_shard(path: Path, images: bool = True) -> list[ObjectEpisode]:

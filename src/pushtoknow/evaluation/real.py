@@ -335,7 +335,7 @@ def _run_filter(model, records, camera, seed: int, num_sigma_points: int | None)
         view = ex.observe()
         rec = ex.execute(recorded.push)  # the recording's own push; nothing to choose
         pose0 = np.asarray(rec.pose[0], dtype=float)  # motion capture (module doc)
-        poses = est.filter_push(rec, view.s0, pose0)
+        poses = est.filter_push(rec, view, pose0)
         estimates.append(est.estimate(k + 1, rec.push))
         d = poses[-1] - rec.pose[-1]
         pose_err.append(

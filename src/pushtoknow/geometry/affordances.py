@@ -40,14 +40,25 @@ class Contour:
         return np.array([((x + xn) * cross).sum(), ((y + yn) * cross).sum()]) / (6 * a)
 
 
-def mask_contour(s0: np.ndarray, camera: CameraModel, z: float = 0.0) -> Contour:
-    """Largest outer contour of a (H, W) mask, in world coordinates on the plane at height z."""
+def mask_contour(
+    s0: np.ndarray, camera: CameraModel, z: float = 0.0, smoothing: float | None = None
+) -> Contour:
+    """Largest outer contour of a (H, W) mask, or of a (kH, kW) one taken by the same camera at
+    k × its resolution, in world coordinates on the plane at height z. The mask is smoothed
+    first by a Gaussian of σ = smoothing (m on that plane), or MASK_SMOOTHING_PX of its own
+    pixels (None)."""
     s0 = np.asarray(s0)
-    if s0.shape != (camera.height, camera.width):
-        raise ShapeError(f"expected mask of shape {(camera.height, camera.width)}, got {s0.shape}")
+    try:
+        camera = camera.resolution_of(s0)
+    except ValueError:
+        raise ShapeError(
+            f"expected a mask of shape {(camera.height, camera.width)} or an integer multiple, "
+            f"got {s0.shape}"
+        ) from None
     if not s0.any():
         raise ValueError("the segmentation S_0 is empty: the object is not in view")
-    img = np.pad(gaussian_filter(s0.astype(np.float64), MASK_SMOOTHING_PX), 1)
+    sigma_px = MASK_SMOOTHING_PX if smoothing is None else smoothing / camera.metres_per_pixel(z)
+    img = np.pad(gaussian_filter(s0.astype(np.float64), sigma_px), 1)
     lines = contourpy.contour_generator(z=img).lines(0.5)
     line = max(lines, key=len)
     uv = line - 1.0  # contourpy gives (x=column, y=row) = (u, v); undo the padding

@@ -162,12 +162,14 @@ def footprint_from_mask(obj: RecordedObject) -> tuple[dict, tuple[float, float]]
     from shapely.geometry import Polygon
 
     from pushtoknow.geometry.affordances import mask_contour
+    from pushtoknow.perception.footprint import OUTLINE_SMOOTHING
 
     rec = obj.records[0]
     if rec.s0 is None or not np.asarray(rec.s0).any():
         raise IdentificationError(f"{obj.name}: no object mask S_0 to estimate the footprint from")
     camera = obj.sim_config.camera.model()
-    contour = mask_contour(np.asarray(rec.s0, dtype=bool), camera, z=obj.height)
+    mask = rec.s0 if rec.outline_mask is None else rec.outline_mask
+    contour = mask_contour(np.asarray(mask, dtype=bool), camera, obj.height, OUTLINE_SMOOTHING)
     x, y, th = map(float, rec.pose[0])
     c, s = np.cos(-th), np.sin(-th)
     d = contour.points - np.array([x, y])

@@ -120,7 +120,7 @@ class InformationPolicy(PushPolicy):
             np.stack([pad_positions(p, times, push_config) for p in d.candidates]),
             dtype=torch.float32,
         )  # (M, T, 2)
-        base = est.context(d.view.s0, d.pose0, paths[:, 0], d.candidates)
+        base = est.context(d.view, d.pose0, paths[:, 0], d.candidates)
 
         def builder(_: Any, step: int) -> PushContext:
             return with_pad_track(base, paths, step + 1, dt)

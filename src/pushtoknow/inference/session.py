@@ -44,7 +44,7 @@ from pushtoknow.inference.policies import (
 from pushtoknow.models.calibration import keep_evidence
 from pushtoknow.models.checkpoint import TrainedModel
 from pushtoknow.models.learned import PushContext, with_pad_track
-from pushtoknow.perception.footprint import footprint_from_mask
+from pushtoknow.perception.footprint import footprint_seen
 from pushtoknow.perception.visnet import frames_as_tensors, visnet_measure
 from pushtoknow.testbed.config import SimConfig
 from pushtoknow.testbed.executor import PushExecutor, SimulatedExecutor, View
@@ -77,7 +77,7 @@ def profile_speeds(sim_config: SimConfig) -> dict[str, float]:
 
 INTERVAL_LEVEL = 0.9  # the interval every estimate reports
 COM_SLICE = slice(PARAM_NAMES.index("com_x"), PARAM_NAMES.index("com_y") + 1)
-COM_MARGIN_PX = 1.0  # a reported CoM lies this many pixels inside the footprint seen in S_0
+COM_MARGIN_PX = 1.0  # a reported CoM lies this many image pixels inside the footprint seen
 
 
 @dataclass
@@ -217,16 +217,17 @@ class ObjectEstimator:
 
     def context(
         self,
-        s0: np.ndarray,
+        view: View,
         pose0: np.ndarray,
         pad_xy: torch.Tensor,
         pushes: list[Push],
     ) -> PushContext:
-        """PushContext for len(pushes) pushes of the object seen in s0 at pose0, pads at
-        pad_xy (B, 2)."""
+        """PushContext for len(pushes) pushes of the object seen in `view` at pose0, pads at
+        pad_xy (B, 2). The footprint is `perception.footprint.footprint_seen` in the view."""
         b = len(pushes)
-        mask0 = torch.as_tensor(s0, dtype=torch.float32)[None, None].expand(b, -1, -1, -1)
-        fp = torch.as_tensor(footprint_from_mask(s0, self.camera, pose0), dtype=torch.float32)
+        mask0 = torch.as_tensor(view.s0, dtype=torch.float32)[None, None].expand(b, -1, -1, -1)
+        fp = footprint_seen(view.s0, view.depth, view.outline_mask, self.camera, pose0)
+        fp = torch.as_tensor(fp, dtype=torch.float32)
         if self._footprint is None:  # the first push's view defines the object frame exactly;
             self._footprint = fp  # later ones depend on the estimated start θ
         return PushContext(
@@ -244,9 +245,9 @@ class ObjectEstimator:
 
     def estimate(self, index: int, push: Push | None = None) -> PushEstimate:
         """The parameter belief as an estimate. m, μ and I_z are positive by construction
-        (log space); the reported CoM mean is kept inside the footprint seen in the first
-        push's S_0 (the view that defines the object frame), at least
-        a pixel from its outline (a 64 px mask rounds a notch's corner by about a pixel): if
+        (log space); the reported CoM mean is kept inside the footprint seen before the first
+        push (the view that defines the object frame), at least an image pixel (9 mm) from its
+        outline (traced to a few millimetres, its corners rounded by about 5 mm): if
         the Gaussian's mean lies closer to the outline or outside, it is moved to the nearest
         such point, as the mean of the belief restricted to the footprint would be."""
         est = belief_to_estimate(index, self.param_mean, self.param_cov, push)
@@ -279,12 +280,12 @@ class ObjectEstimator:
         return meas[0].double().numpy()
 
     @torch.no_grad()
-    def filter_push(self, rec: PushRecord, s0: np.ndarray, pose0: np.ndarray) -> np.ndarray:
-        """Run the filter over one executed push; updates the parameter belief. Returns the
-        filtered pose means (T, 3)."""
+    def filter_push(self, rec: PushRecord, view: View, pose0: np.ndarray) -> np.ndarray:
+        """Run the filter over one executed push of the object seen in `view` before it;
+        updates the parameter belief. Returns the filtered pose means (T, 3)."""
         filt, cam = self.filter, self.camera
         mean, cov = self.start_belief(pose0)
-        base = self.context(s0, pose0, torch.zeros(1, 2), [rec.push])
+        base = self.context(view, pose0, torch.zeros(1, 2), [rec.push])
         frames = frames_as_tensors(rec.rgb, rec.depth, cam)
         pusher = torch.as_tensor(rec.pusher, dtype=torch.float32)
         tactile = torch.as_tensor(rec.tactile, dtype=torch.float32)
@@ -313,7 +314,7 @@ class ObjectEstimator:
         )
         self.param_mean = param_mean[0].clone()
         self.param_cov = param_cov[0].clone()
-        self._prev = (s0, pose0)
+        self._prev = (view.s0, pose0)
         self._last_pose = mean[0, :3].double().numpy()
         return np.stack(poses)
 
@@ -368,7 +369,7 @@ def infer_object(
         )
         push = policy.choose(decision)
         rec = executor.execute(push)
-        result.poses.append(est.filter_push(rec, view.s0, pose0))
+        result.poses.append(est.filter_push(rec, view, pose0))
         result.records.append(rec)
         e = est.estimate(k + 1, push)
         result.estimates.append(e)

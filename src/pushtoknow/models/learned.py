@@ -473,7 +473,7 @@ class LearnedModelsConfig(Config):
     down; the networks' hidden sizes and output scales are those of `process` and `tac`).
     quasi_static (physics structure only): "network" (a network learns quasi-static motion
     and force from geometry, contact and the CoM) or "limit-surface" (`models.contact`: the
-    pad pushes the outline seen in S_0 through the ellipsoidal limit surface about the CoM,
+    pad pushes the outline seen before the push through the ellipsoidal limit surface about the CoM,
     and the networks learn what that leaves); pad_radius: the pad's radius (m) for it.
     """
 

@@ -11,7 +11,7 @@ Schaal and Bohg, IJRR 2022; README "The models").
   t and t-1, i.e. in steady pushes) that sees μ and I_z/m only as the
   dimensionless groups of sliding (a/μg, v²/2μgL, log I_z/(m L²)); m alone never enters.
 * With `quasi_static: limit-surface` (`LimitSurface`, `models.contact`), the quasi-static
-  part is written down too: the pad pushes the outline seen in S_0 through the ellipsoidal
+  part is written down too: the pad pushes the outline seen before the push through the ellipsoidal
   limit surface about the CoM, which gives the slider's step; the networks then learn only
   what that model leaves. (Its force, μ m g n / √(1 + ρ²), is left to the friction network:
   as a fixed term it made μ·m worse on validation objects, through the contact decision on
@@ -60,8 +60,8 @@ from pushtoknow.models.networks import PhysicsProcessNet, PhysicsTacNet
 
 ACCEL_SCALE = 1.0  # m/s², normalises the pad's acceleration features
 GATE_ACCEL = 0.5  # m/s²: scale of the gate of the dynamic motion term (below)
-CONTACT_REACH = 1e-3  # m: a pad this close to the outline seen in S_0 counts as touching
-CONTACT_SOFTNESS = 5e-4  # m: width of that decision (a 64 px mask is ~1 mm off)
+CONTACT_REACH = 1e-3  # m: a pad this close to the outline seen counts as touching
+CONTACT_SOFTNESS = 5e-4  # m: width of that decision (a traced outline is ~1 mm off)
 GEOM_DIM = 19
 DYN_DIM = GEOM_DIM + 5
 INERTIAL_DIM = GEOM_DIM + 1

@@ -17,6 +17,14 @@ class CameraConfig(Config):
     height: int = Field(64, gt=0)
     fovy_deg: float = Field(45.0, gt=0, lt=170)
     distance: float = Field(0.75, gt=0, description="camera height above the table (m)")
+    outline_scale: int = Field(
+        4,
+        ge=1,
+        le=16,
+        description="S_0's object mask is also taken at this many times the images' resolution "
+        "(a real RGB-D camera's full resolution; the images are what VisNet sees), and the "
+        "object's outline is traced on it",
+    )
 
     def model(self) -> CameraModel:
         return CameraModel(self.width, self.height, self.fovy_deg, (0.0, 0.0, self.distance))

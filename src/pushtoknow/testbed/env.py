@@ -54,6 +54,9 @@ class PushEnv(gym.Env):
                 "rgb": spaces.Box(0, 255, (H, W, 3), np.uint8),
                 "depth": spaces.Box(0.0, 2 * cam.distance, (H, W), np.float32),
                 "s0": spaces.Box(0, 1, (H, W), np.uint8),
+                "outline_mask": spaces.Box(
+                    0, 1, (cam.outline_scale * H, cam.outline_scale * W), np.uint8
+                ),
             }
         )
         self.action_space = spaces.Box(0.0, 1.0, (4,), np.float32)
@@ -63,7 +66,12 @@ class PushEnv(gym.Env):
 
     def _obs(self) -> dict:
         v = self._view
-        return {"rgb": v.rgb, "depth": v.depth, "s0": v.s0.astype(np.uint8)}
+        return {
+            "rgb": v.rgb,
+            "depth": v.depth,
+            "s0": v.s0.astype(np.uint8),
+            "outline_mask": v.outline_mask.astype(np.uint8),
+        }
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)

@@ -23,7 +23,8 @@ from pushtoknow.testbed.sim import PushRecord, PushSimulator
 
 @dataclass(frozen=True)
 class View:
-    """What the camera shows before a push: RGB (H, W, 3) uint8, depth (H, W) m, S_0 (H, W).
+    """What the camera shows before a push: RGB (H, W, 3) uint8, depth (H, W) m, S_0 (H, W),
+    and S_0 at the outline resolution (kH, kW) (None where the camera gives none).
 
     moved_by: (dx, dy) m by which the executor translated the object since the end of the
     previous push (re-centring), None if it did not or does not know."""
@@ -31,7 +32,13 @@ class View:
     rgb: np.ndarray
     depth: np.ndarray
     s0: np.ndarray
+    outline_mask: np.ndarray | None = None
     moved_by: tuple[float, float] | None = None
+
+    @classmethod
+    def before(cls, record: PushRecord) -> View:
+        """What the camera showed before a recorded push (its first frame and masks)."""
+        return cls(record.rgb[0], record.depth[0], record.s0, record.outline_mask)
 
 
 class PushExecutor(ABC):
@@ -136,7 +143,7 @@ class RecordedExecutor(PushExecutor):
 
     def observe(self) -> View:
         r = self._current()
-        return View(r.rgb[0], r.depth[0], r.s0)
+        return View.before(r)
 
     def execute(self, push: Push) -> PushRecord:
         r = self._current()

@@ -51,12 +51,12 @@ class OverheadRenderer:
         self._near = model.vis.map.znear * extent
         self._far = model.vis.map.zfar * extent
 
-    def _draw(self, data: mujoco.MjData) -> None:
+    def _draw(self, data: mujoco.MjData, rect: mujoco.MjrRect | None = None) -> None:
         self._gl.make_current()
         mujoco.mjv_updateScene(
             self.model, data, self._opt, None, self._cam, mujoco.mjtCatBit.mjCAT_ALL, self._scene
         )
-        mujoco.mjr_render(self._rect, self._scene, self._con)
+        mujoco.mjr_render(self._rect if rect is None else rect, self._scene, self._con)
 
     def rgbd(self, data: mujoco.MjData) -> tuple[np.ndarray, np.ndarray]:
         """(H, W, 3) uint8 RGB and (H, W) float32 depth in metres."""
@@ -67,18 +67,26 @@ class OverheadRenderer:
         depth = self._near / (1.0 - d * (1.0 - self._near / self._far))
         return rgb, depth.astype(np.float32)
 
-    def segmentation(self, data: mujoco.MjData) -> np.ndarray:
-        """(H, W) bool mask of the object's geoms."""
+    def segmentation(self, data: mujoco.MjData, scale: int = 1) -> np.ndarray:
+        """(scale·H, scale·W) bool mask of the object's geoms, rendered at `scale` × the image
+        resolution (the model's offscreen buffer must be that large)."""
         flags = self._scene.flags
         flags[mujoco.mjtRndFlag.mjRND_SEGMENT] = 1
         flags[mujoco.mjtRndFlag.mjRND_IDCOLOR] = 1
+        h, w = scale * self.height, scale * self.width
+        if w > self.model.vis.global_.offwidth or h > self.model.vis.global_.offheight:
+            raise ValueError(
+                f"a {w} × {h} segmentation exceeds the model's offscreen buffer "
+                f"({self.model.vis.global_.offwidth} × {self.model.vis.global_.offheight})"
+            )
+        buf = self._rgb if scale == 1 else np.empty((h, w, 3), dtype=np.uint8)
         try:
-            self._draw(data)
-            mujoco.mjr_readPixels(self._rgb, None, self._rect, self._con)
+            self._draw(data, mujoco.MjrRect(0, 0, w, h))
+            mujoco.mjr_readPixels(buf, None, mujoco.MjrRect(0, 0, w, h), self._con)
         finally:
             flags[mujoco.mjtRndFlag.mjRND_SEGMENT] = 0
             flags[mujoco.mjtRndFlag.mjRND_IDCOLOR] = 0
-        px = np.flipud(self._rgb).astype(np.int64)
+        px = np.flipud(buf).astype(np.int64)
         idx = px[..., 0] + px[..., 1] * 256 + px[..., 2] * 65536 - 1  # index into scene.geoms
         ngeom = self._scene.ngeom
         geom_of = np.full(ngeom + 1, -1, dtype=np.int64)

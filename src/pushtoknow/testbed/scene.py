@@ -155,7 +155,7 @@ def build_mjcf(spec: ObjectSpec, config: SimConfig) -> str:
     ixx = body_inertia / 2 + body_mass * h * h / 12
     pad_condim = 1 if pad.friction == 0 else 3
     fov = cam.fovy_deg
-    size = max(cam.width, cam.height)
+    size = max(cam.width, cam.height) * cam.outline_scale
     return f"""
 <mujoco model="pushtoknow">
   <compiler angle="radian" inertiafromgeom="false"/>

@@ -31,6 +31,8 @@ class PushRecord:
 
     pose: (T, 3) object geometric-frame pose (x, y, θ), θ unwrapped (m, m, rad)
     rgb: (T, H, W, 3) uint8; depth: (T, H, W) float32 metres; s0: (H, W) bool object mask at t_0
+    outline_mask: (kH, kW) bool object mask at t_0 at the camera's outline resolution
+    (k = `CameraConfig.outline_scale`), None where it was not rendered
     tactile: (T, 3) noisy (F_x, F_y, contact) in N, world frame, force by the pad on the object
     force_clean: (T, 2) noiseless force; pusher: (T, 2) pad centre (m); time: (T,) s
     trace: optional physics-rate record {"time", "pose", "velocity", "force"} for tests
@@ -46,12 +48,14 @@ class PushRecord:
     depth: np.ndarray | None
     s0: np.ndarray | None
     trace: dict | None = field(default=None, repr=False)
+    outline_mask: np.ndarray | None = None
 
     def __eq__(self, other) -> bool:
         """Equal when the push and every recorded array are identical (bitwise)."""
         if not isinstance(other, PushRecord) or self.push != other.push:
             return False
         names = ("time", "pose", "tactile", "force_clean", "pusher", "rgb", "depth", "s0")
+        names += ("outline_mask",)
         return all(
             (a is None and b is None) or (a is not None and b is not None and np.array_equal(a, b))
             for a, b in ((getattr(self, n), getattr(other, n)) for n in names)
@@ -127,10 +131,15 @@ class PushSimulator:
             mujoco.mj_step(self.model, self.data)
         return self.object_pose()
 
-    def observe(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Current RGB (H, W, 3) uint8, depth (H, W) float32 m, and object mask S (H, W) bool."""
+    def observe(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Current RGB (H, W, 3) uint8, depth (H, W) float32 m, object mask S (H, W) bool, and
+        the object mask at the outline resolution (kH, kW) bool."""
         rgb, depth = self.renderer.rgbd(self.data)
-        return rgb, depth, self.renderer.segmentation(self.data)
+        return rgb, depth, self.renderer.segmentation(self.data), self.outline_mask()
+
+    def outline_mask(self) -> np.ndarray:
+        """(kH, kW) bool object mask at `CameraConfig.outline_scale` × the image resolution."""
+        return self.renderer.segmentation(self.data, self.config.camera.outline_scale)
 
     def support_load(self) -> float:
         """Total normal force of the table on the supports over the object's weight (1 at rest;
@@ -232,7 +241,7 @@ class PushSimulator:
         contact_share = np.zeros(T)
         pusher = np.zeros((T, 2))
         time = np.arange(T) / rate
-        rgb = depth = s0 = None
+        rgb = depth = s0 = outline = None
         if render:
             H, W = cfg.camera.height, cfg.camera.width
             rgb = np.zeros((T, H, W, 3), np.uint8)
@@ -317,6 +326,7 @@ class PushSimulator:
                 if render:
                     if k == 0:
                         s0 = self.renderer.segmentation(data)
+                        outline = self.outline_mask()
                     rgb[k], depth[k] = self.renderer.rgbd(data)
         finally:
             model.opt.timestep = dt
@@ -327,7 +337,7 @@ class PushSimulator:
         tactile[0, :2] = noise[0]
         if tr is not None:
             tr = {k: np.asarray(v) for k, v in tr.items()}
-        return PushRecord(push, time, pose, tactile, force, pusher, rgb, depth, s0, tr)
+        return PushRecord(push, time, pose, tactile, force, pusher, rgb, depth, s0, tr, outline)
 
     def close(self) -> None:
         if self._renderer is not None:

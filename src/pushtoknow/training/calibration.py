@@ -10,8 +10,9 @@ every push; each direction takes the weight with the lowest mean NLL over all pu
 give the lowest NLL summed over the directions. With `profile_rounds`, each speed profile's
 weights are then chosen in turn with the others' held (coordinate descent, as many rounds): a
 release push's model errors are not a constant push's, and a policy that mostly chooses one
-profile must not inherit weights set for the mix. The choice is made on validation objects only
-(never on the evaluation's held-out ones).
+profile must not inherit weights set for the mix. With `max_weights`, a direction takes no
+weight above its cap. The choice is made on validation objects only (never on the evaluation's
+held-out ones).
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ from __future__ import annotations
 import math
 
 import torch
-from pydantic import Field
+from pydantic import Field, field_validator, model_validator
 
 from pushtoknow.common.config import Config
 from pushtoknow.models.calibration import DIRECTIONS, evidence_basis, keep_evidence
@@ -43,6 +44,35 @@ class SequenceCalibrationConfig(Config):
     )
     num_sigma_points: int = Field(32, ge=10)
     init_pose_std: tuple[float, float, float] = (1e-3, 1e-3, 0.01)
+    max_weights: dict[str, float] = Field(
+        {},
+        description="highest weight a direction may take (keys: "
+        + ", ".join(DIRECTIONS)
+        + "); the validation objects are of the training shapes, on which the models fit "
+        "better than on unseen ones",
+    )
+
+    @field_validator("max_weights")
+    @classmethod
+    def _known_directions(cls, v: dict[str, float]) -> dict[str, float]:
+        for name, cap in v.items():
+            if name not in DIRECTIONS:
+                raise ValueError(f"unknown direction {name!r}; expected one of {DIRECTIONS}")
+            if not 0.0 <= cap <= 1.0:
+                raise ValueError(f"max_weights.{name} = {cap}: a weight lies in [0, 1]")
+        return v
+
+    @model_validator(mode="after")
+    def _some_weight_allowed(self) -> SequenceCalibrationConfig:
+        for name, cap in self.max_weights.items():
+            if cap < min(self.weights) - 1e-12:
+                raise ValueError(f"max_weights.{name} = {cap} is below every candidate weight")
+        return self
+
+    def allowed(self) -> torch.Tensor:
+        """(W, K) bool: which of `weights` each direction may take."""
+        caps = torch.tensor([self.max_weights.get(d, 1.0) for d in DIRECTIONS])
+        return torch.tensor(self.weights)[:, None] <= caps[None, :] + 1e-12
 
 
 def push_sequences(pt: PushTensors, max_objects: int) -> torch.Tensor:
@@ -147,8 +177,9 @@ def calibrate_evidence(
                 )
             if progress:
                 progress.advance(task)
-        return torch.stack(nll).min(0)
+        return torch.stack(nll).masked_fill(~allowed, math.inf).min(0)
 
+    allowed = cfg.allowed()
     # float64 tables hold the grid's weights exactly, so the chosen ones are its values
     grid = torch.tensor(cfg.weights, dtype=torch.float64)
     every = list(range(len(PROFILES)))

@@ -1,8 +1,8 @@
 """Pushes of a dataset as tensors for training and evaluation.
 
 Everything the filter needs per push, images excepted (VisNet turns them into poses first):
-S_0, the object-frame footprint polygon estimated from S_0, poses, tactile, pusher track,
-the action and the true parameters.
+S_0, the object-frame footprint polygon seen before the push (`perception.footprint.
+footprint_seen`), poses, tactile, pusher track, the action and the true parameters.
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ from pushtoknow.common.camera import CameraModel
 from pushtoknow.common.errors import DatasetError
 from pushtoknow.common.params import normalise_params
 from pushtoknow.datasets.shards import list_shards, open_shard
-from pushtoknow.perception.footprint import footprint_from_mask
+from pushtoknow.perception.footprint import footprint_seen
 from pushtoknow.testbed.config import SimConfig, stored_sim_config
 from pushtoknow.testbed.push import Push, release_point
 
@@ -28,7 +28,8 @@ class PushTensors:
 
     mask0 (N, 1, H, W) · pose (N, T, 3) true · tactile (N, T, 3) · force_clean (N, T, 2)
     pusher (N, T, 2) · action (N, 5) · params (N, 5) SI (float64) · params_norm (N, 5)
-    footprint (N, V, 2) from S_0 · release (N, 3) each push's `testbed.push.release_point`
+    footprint (N, V, 2) seen before the push
+    release (N, 3) each push's `testbed.push.release_point`
     · object_index (N,) int64
     push_index (N,) int64 (order within its object) · vision_pose (N, T, 3) or None
     step_dt: time between samples (s)
@@ -104,7 +105,8 @@ def load_push_tensors(root: Path, max_objects: int | None = None) -> PushTensors
                     p = g["pushes"][pk]
                     s0 = p["s0"][()]
                     pose = p["pose"][()]
-                    fp = footprint_from_mask(s0, camera, pose[0])
+                    outline = p["outline_mask"][()] if "outline_mask" in p else None
+                    fp = footprint_seen(s0, p["depth"][0], outline, camera, pose[0])
                     cols["mask0"].append(s0[None].astype(np.float32))
                     cols["pose"].append(pose)
                     cols["tactile"].append(p["tactile"][()])
