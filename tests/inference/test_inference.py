@@ -275,3 +275,20 @@ def test_profiles_the_model_never_saw_are_refused(model, spec):
     finally:
         ex.close()
     assert sorted(model.info["profiles"]) == ["constant", "release"]  # recorded by training
+
+
+def test_each_push_keeps_the_evidence_of_its_count_among_its_profiles(model, spec, monkeypatch):
+    """The estimator counts pushes per speed profile: constant, release, constant are the
+    first constant, the first release and the second constant push."""
+    from pushtoknow.models.checkpoint import InferenceSettings
+
+    calls = []
+    kept = InferenceSettings.kept_evidence
+
+    def spy(self, profile, nth):
+        calls.append((profile, nth))
+        return kept(self, profile, nth)
+
+    monkeypatch.setattr(InferenceSettings, "kept_evidence", spy)
+    infer(model, spec, "uniform", seed=0, pushes=3, profiles=("constant", "release"))
+    assert calls == [("constant", 1), ("release", 1), ("constant", 2)]

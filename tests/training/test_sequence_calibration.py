@@ -132,3 +132,56 @@ def test_max_weights_must_name_a_direction_and_allow_a_weight():
         SequenceCalibrationConfig(max_weights={"com_x": 1.5})
     with pytest.raises(ValidationError, match="below every candidate weight"):
         SequenceCalibrationConfig(weights=(0.25, 1.0), max_weights={"com_y": 0.1})
+
+
+def test_a_shared_error_discounts_the_later_pushes_of_a_profile(tmp_path_factory):
+    """run_sequences applies g_ρ(n) to the n-th push of each profile: ρ = 0 is the plain
+    weights; with a huge ρ only each profile's first push moves the belief."""
+    from pushtoknow.models.checkpoint import load_checkpoint
+    from pushtoknow.training.calibration import SequenceCalibrationConfig, run_sequences
+
+    model = load_checkpoint(tiny_run(tmp_path_factory)).eval()
+    pt = load_push_tensors(tiny_dataset(tmp_path_factory))
+    cfg = SequenceCalibrationConfig(num_sigma_points=SIGMA_POINTS)
+    seqs = push_sequences(pt, cfg.max_objects)
+    profiles = pt.action[seqs, 4].long()
+    table = torch.ones(2, 5)
+    with torch.no_grad():
+        plain = run_sequences(model, pt, seqs, table, model.inference, cfg, seed=0)
+        zero = run_sequences(model, pt, seqs, table, model.inference, cfg, 0, torch.zeros(5))
+        shared = run_sequences(
+            model, pt, seqs, table, model.inference, cfg, 0, torch.full((5,), 1e7)
+        )
+    for (m, c), (mz, cz) in zip(plain, zero, strict=True):
+        torch.testing.assert_close(m, mz)
+        torch.testing.assert_close(c, cz)
+    repeats = 0
+    for j in range(1, seqs.shape[1]):
+        again = (profiles[:, :j] == profiles[:, j : j + 1]).any(1)  # not the profile's first
+        repeats += int(again.sum())
+        torch.testing.assert_close(shared[j][0][again], shared[j - 1][0][again], atol=1e-5, rtol=0)
+        first = ~again
+        if first.any():
+            assert not torch.allclose(shared[j][0][first], shared[j - 1][0][first])
+    assert repeats > 0  # the tiny data repeats a profile within a sequence
+
+
+def test_correlations_are_chosen_per_direction_with_the_weights(tmp_path_factory):
+    from pushtoknow.models.checkpoint import load_checkpoint
+    from pushtoknow.training.calibration import SequenceCalibrationConfig, calibrate_evidence
+
+    model = load_checkpoint(tiny_run(tmp_path_factory)).eval()
+    pt = load_push_tensors(tiny_dataset(tmp_path_factory))
+    cfg = SequenceCalibrationConfig(
+        weights=(0.0, 0.5, 1.0), correlations=(0.0, 1.0), num_sigma_points=SIGMA_POINTS
+    )
+    rows: list[dict] = []
+    with torch.no_grad():
+        chosen = calibrate_evidence(model, pt, cfg, seed=0, log=rows.append)
+    assert [r["correlation"] for r in rows] == ["0 0 0 0 0"] * 3 + ["1 1 1 1 1"] * 3
+    for k, d in enumerate(DIRECTIONS):
+        best = min(rows, key=lambda r: r[f"nll_{d}"])  # the first of equals: ρ = 0 wins ties
+        assert chosen.evidence_weights[k] == best["weight"]
+        assert chosen.evidence_correlation[k] == float(best["correlation"].split()[0])
+    with pytest.raises(ValueError, match="≥ 0"):
+        SequenceCalibrationConfig(correlations=(0.0, -0.5))

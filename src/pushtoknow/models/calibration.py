@@ -14,6 +14,11 @@ With y = Rᵀ-coordinates in that basis and w ∈ [0, 1] per direction:
     y = y₀ + w ⊙ (y₁ − y₀),   var = var₁ + (1 − w) ⊙ (var₀ − var₁)   (marginals in the basis),
 and the correlations of the posterior are kept. w = 1 is the filter's posterior, w = 0 the
 push's prior. `training.calibration` chooses w on validation objects' push sequences.
+
+Pushes of one profile share part of their model error (the same model, outline and object),
+so a second push of a profile tells less than the first: the n-th keeps w·g_ρ(n) of its
+evidence (`evidence_discount`), ρ per direction, chosen with w. ρ = 0: the pushes' errors are
+independent and every push keeps w.
 """
 
 from __future__ import annotations
@@ -38,6 +43,26 @@ def evidence_basis() -> torch.Tensor:
     for row, name in zip((2, 3, 4), ("com_x", "com_y", "inertia"), strict=True):
         basis[row, PARAM_NAMES.index(name)] = 1.0
     return torch.as_tensor(basis, dtype=torch.float32)
+
+
+def evidence_discount(nth: torch.Tensor, correlation: torch.Tensor) -> torch.Tensor:
+    """g_ρ(n) (..., K): the share of the first push's evidence that the n-th push of a profile
+    adds when every push measures a direction as θ + b + εₙ, with a bias b common to the
+    pushes (variance ρσ²) and independent εₙ (σ²).
+
+    n pushes then carry the information n / (σ²(1 + nρ)) (the variance of their mean is
+    σ²(ρ + 1/n)), so the n-th adds g_ρ(n) = (1 + ρ) / ((1 + nρ)(1 + (n − 1)ρ)) of the
+    first's: g(1) = 1, g_0 ≡ 1, and Σ_{i≤n} g(i) = n(1 + ρ)/(1 + nρ) → (1 + ρ)/ρ, a bound
+    however many pushes are made.
+    nth (...,) ≥ 1 (a push's count among its profile's, itself included); correlation (K,)
+    ρ ≥ 0 per direction.
+    """
+    if bool((nth < 1).any()):
+        raise ValueError(f"a push's count among its profile's starts at 1, got {nth.min()}")
+    if bool((correlation < 0).any()):
+        raise ValueError(f"evidence correlations must be ≥ 0, got {correlation.tolist()}")
+    n = nth.to(correlation.dtype).unsqueeze(-1)
+    return (1.0 + correlation) / ((1.0 + n * correlation) * (1.0 + (n - 1.0) * correlation))
 
 
 def keep_evidence(

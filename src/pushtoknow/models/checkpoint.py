@@ -23,6 +23,7 @@ from pushtoknow.common.config import Config
 from pushtoknow.common.errors import CheckpointError, first_line
 from pushtoknow.filters.base import BeliefFilter, FilterConfig
 from pushtoknow.filters.gaussian import symmetrize
+from pushtoknow.models.calibration import evidence_discount
 from pushtoknow.models.learned import (
     FilterKind,
     LearnedModels,
@@ -103,7 +104,9 @@ class InferenceSettings(Config):
     evidence_weights: the share of each push's evidence the parameter belief keeps, per
     direction of `models.calibration.DIRECTIONS` (1: the filter's posterior as it is);
     profile_evidence_weights: the same for pushes of a named speed profile, where its model
-    errors differ (`evidence_weights_for`)."""
+    errors differ (`evidence_weights_for`); evidence_correlation: ρ per direction, the share
+    of a push's model error common to every push of its profile (the n-th push of a profile
+    keeps its weight × `models.calibration.evidence_discount`; 0: independent pushes)."""
 
     update_every: int = Field(1, ge=1)
     noise_scale: float = Field(1.0, gt=0)
@@ -115,6 +118,7 @@ class InferenceSettings(Config):
     profile_evidence_weights: dict[str, tuple[float, float, float, float, float]] = Field(
         default_factory=dict, description="per speed profile; absent: evidence_weights"
     )
+    evidence_correlation: tuple[float, float, float, float, float] = (0.0, 0.0, 0.0, 0.0, 0.0)
 
     @field_validator("evidence_weights")
     @classmethod
@@ -132,6 +136,13 @@ class InferenceSettings(Config):
             cls._in_unit_interval(weights)
         return v
 
+    @field_validator("evidence_correlation")
+    @classmethod
+    def _non_negative(cls, v):
+        if not all(r >= 0.0 for r in v):
+            raise ValueError(f"evidence correlations must be ≥ 0, got {list(v)}")
+        return v
+
     def evidence_weights_for(self, profile: str) -> tuple[float, float, float, float, float]:
         """The evidence weights of a push with speed profile `profile`."""
         return self.profile_evidence_weights.get(profile, self.evidence_weights)
@@ -139,6 +150,12 @@ class InferenceSettings(Config):
     def evidence_weight_table(self, dtype: torch.dtype = torch.float32) -> torch.Tensor:
         """(P, K) evidence weights per speed profile, rows in `testbed.push.PROFILES` order."""
         return torch.tensor([self.evidence_weights_for(p) for p in PROFILES], dtype=dtype)
+
+    def kept_evidence(self, profile: str, nth: int) -> torch.Tensor:
+        """(K,) the evidence weights of the `nth` (≥ 1) push of speed profile `profile`."""
+        weights = torch.tensor(self.evidence_weights_for(profile), dtype=torch.float64)
+        rho = torch.tensor(self.evidence_correlation, dtype=torch.float64)
+        return (weights * evidence_discount(torch.tensor(nth), rho)).float()
 
 
 @dataclass

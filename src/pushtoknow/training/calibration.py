@@ -10,9 +10,12 @@ every push; each direction takes the weight with the lowest mean NLL over all pu
 give the lowest NLL summed over the directions. With `profile_rounds`, each speed profile's
 weights are then chosen in turn with the others' held (coordinate descent, as many rounds): a
 release push's model errors are not a constant push's, and a policy that mostly chooses one
-profile must not inherit weights set for the mix. With `max_weights`, a direction takes no
-weight above its cap. The choice is made on validation objects only (never on the evaluation's
-held-out ones).
+profile must not inherit weights set for the mix. With `correlations`, the share of a push's
+model error common to its profile's pushes (`models.calibration.evidence_discount`) is chosen
+per direction with the weights, between the common choice and the profile rounds: each
+candidate ρ is scanned over the weights, and a direction keeps the (w, ρ) of lowest NLL. With
+`max_weights`, a direction takes no weight above its cap (the first push's weight). The
+choice is made on validation objects only (never on the evaluation's held-out ones).
 """
 
 from __future__ import annotations
@@ -23,7 +26,12 @@ import torch
 from pydantic import Field, field_validator, model_validator
 
 from pushtoknow.common.config import Config
-from pushtoknow.models.calibration import DIRECTIONS, evidence_basis, keep_evidence
+from pushtoknow.models.calibration import (
+    DIRECTIONS,
+    evidence_basis,
+    evidence_discount,
+    keep_evidence,
+)
 from pushtoknow.models.checkpoint import InferenceSettings, TrainedModel
 from pushtoknow.testbed.push import PROFILES
 from pushtoknow.training.data import PushTensors
@@ -41,6 +49,11 @@ class SequenceCalibrationConfig(Config):
         ge=0,
         description="rounds of per-profile weight choice after the common one (0: one set of "
         "weights for every speed profile)",
+    )
+    correlations: tuple[float, ...] = Field(
+        (0.0,),
+        description="candidate shares ρ ≥ 0 of a push's model error common to its profile's "
+        "pushes (0: independent pushes)",
     )
     num_sigma_points: int = Field(32, ge=10)
     init_pose_std: tuple[float, float, float] = (1e-3, 1e-3, 0.01)
@@ -60,6 +73,13 @@ class SequenceCalibrationConfig(Config):
                 raise ValueError(f"unknown direction {name!r}; expected one of {DIRECTIONS}")
             if not 0.0 <= cap <= 1.0:
                 raise ValueError(f"max_weights.{name} = {cap}: a weight lies in [0, 1]")
+        return v
+
+    @field_validator("correlations")
+    @classmethod
+    def _non_negative(cls, v: tuple[float, ...]) -> tuple[float, ...]:
+        if not v or any(r < 0.0 for r in v):
+            raise ValueError(f"correlations must be one or more values ≥ 0, got {list(v)}")
         return v
 
     @model_validator(mode="after")
@@ -95,10 +115,12 @@ def run_sequences(
     settings: InferenceSettings,
     cfg: SequenceCalibrationConfig,
     seed: int,
+    correlation: torch.Tensor | None = None,
 ) -> list[tuple[torch.Tensor, torch.Tensor]]:
     """Parameter beliefs (mean (N, K), cov (N, K, K)) after each push of each sequence.
 
-    weights: (P, K) evidence weights per speed profile (`PROFILES` order)."""
+    weights: (P, K) evidence weights per speed profile (`PROFILES` order); correlation (K,):
+    ρ per direction (None: 0), the n-th push of a profile keeping weight × g_ρ(n)."""
     gen = torch.Generator().manual_seed(seed)
     filt = model.build_filter(
         cfg.num_sigma_points, settings.noise_scale, settings.dynamic_noise_scale
@@ -108,6 +130,9 @@ def run_sequences(
     mean_par = model.prior.mean.expand(n, k).clone()
     cov_par = model.prior.cov.expand(n, k, k).clone()
     pose_std = torch.tensor(cfg.init_pose_std)
+    rho = torch.zeros(k, dtype=weights.dtype) if correlation is None else correlation
+    counts = torch.zeros(n, len(PROFILES), dtype=torch.long)
+    rows = torch.arange(n)
     out = []
     for j in range(p):
         push = seqs[:, j]
@@ -121,7 +146,9 @@ def run_sequences(
             model.vision_only, settings.update_every,
         ):  # fmt: skip
             pass
-        kept = weights[pt.action[push, 4].long()]
+        profile = pt.action[push, 4].long()
+        counts[rows, profile] += 1
+        kept = weights[profile] * evidence_discount(counts[rows, profile], rho.to(weights))
         mean_par, cov_par = keep_evidence(mean_par, cov_par, mean[:, 3:], cov[:, 3:, 3:], kept)
         out.append((mean_par, cov_par))
     return out
@@ -151,17 +178,28 @@ def calibrate_evidence(
         for d in cfg.dynamic_noise_scales
     ]
     present = sorted(set(val.action[seqs.flatten(), 4].long().tolist()))
-    total = len(cfg.weights) * (len(candidates) + cfg.profile_rounds * len(present))
-    task = progress.add_task("sequence calibration", total=total) if progress else None
+    correlations = [float(r) for r in cfg.correlations if r != 0.0]
+    runs = len(candidates) + len(correlations) + cfg.profile_rounds * len(present)
+    task = (
+        progress.add_task("sequence calibration", total=len(cfg.weights) * runs)
+        if progress
+        else None
+    )
 
-    def scan(settings: InferenceSettings, table: torch.Tensor, rows: list[int], label: str):
+    def scan(
+        settings: InferenceSettings,
+        table: torch.Tensor,
+        rows: list[int],
+        label: str,
+        rho: torch.Tensor,
+    ):
         """(lowest NLL (K,), the weight index reaching it (K,)) over `cfg.weights`, each put in
-        `rows` of `table` (P, K), the other rows held."""
+        `rows` of `table` (P, K), the other rows held; rho (K,) the correlations."""
         nll = []
         for w in cfg.weights:
             trial = table.clone()
             trial[rows] = float(w)
-            beliefs = run_sequences(model, val, seqs, trial, settings, cfg, seed)
+            beliefs = run_sequences(model, val, seqs, trial, settings, cfg, seed, rho)
             per_push = torch.stack([direction_nll(m, c, truth).mean(0) for m, c in beliefs])
             nll.append(per_push.mean(0))  # (K,) mean over pushes and objects
             if log:
@@ -169,6 +207,7 @@ def calibrate_evidence(
                     {
                         "dynamic_noise_scale": settings.dynamic_noise_scale or "",
                         "profile": label,
+                        "correlation": " ".join(f"{r:g}" for r in rho.tolist()),
                         "weight": w,
                         "pushes": seqs.shape[1],
                         "objects": seqs.shape[0],
@@ -183,19 +222,40 @@ def calibrate_evidence(
     # float64 tables hold the grid's weights exactly, so the chosen ones are its values
     grid = torch.tensor(cfg.weights, dtype=torch.float64)
     every = list(range(len(PROFILES)))
-    best_total, best = math.inf, model.inference
+    blank = torch.zeros(len(PROFILES), len(DIRECTIONS), dtype=grid.dtype)
+    independent = torch.zeros(len(DIRECTIONS), dtype=grid.dtype)
+    best_total, best, best_lowest = math.inf, model.inference, None
     for settings in candidates:
-        lowest, index = scan(
-            settings, torch.zeros(len(PROFILES), 5, dtype=grid.dtype), every, "all"
-        )
+        lowest, index = scan(settings, blank, every, "all", independent)
         if float(lowest.sum()) < best_total:
-            best_total = float(lowest.sum())
-            best = settings.model_copy(update={"evidence_weights": tuple(grid[index].tolist())})
+            best_total, best_lowest = float(lowest.sum()), lowest
+            best = settings.model_copy(
+                update={
+                    "evidence_weights": tuple(grid[index].tolist()),
+                    "evidence_correlation": tuple(independent.tolist()),
+                }
+            )
+    if correlations:
+        weights = torch.tensor(best.evidence_weights, dtype=grid.dtype)
+        rho = independent.clone()
+        for r in correlations:
+            lowest, index = scan(best, blank, every, "all", torch.full_like(rho, r))
+            better = lowest < best_lowest
+            best_lowest = torch.where(better, lowest, best_lowest)
+            weights = torch.where(better, grid[index], weights)
+            rho = torch.where(better, torch.full_like(rho, r), rho)
+        best = best.model_copy(
+            update={
+                "evidence_weights": tuple(weights.tolist()),
+                "evidence_correlation": tuple(rho.tolist()),
+            }
+        )
     if cfg.profile_rounds:
         table = best.evidence_weight_table(grid.dtype)
+        rho = torch.tensor(best.evidence_correlation, dtype=grid.dtype)
         for _ in range(cfg.profile_rounds):
             for p in present:
-                table[p] = grid[scan(best, table, [p], PROFILES[p])[1]]
+                table[p] = grid[scan(best, table, [p], PROFILES[p], rho)[1]]
         best = best.model_copy(
             update={
                 "profile_evidence_weights": {PROFILES[p]: tuple(table[p].tolist()) for p in present}
