@@ -100,52 +100,55 @@ def test_a_profile_without_its_own_weights_uses_the_common_ones():
         InferenceSettings(profile_evidence_weights={"release": (1.0, 1.0, 2.0, 1.0, 1.0)})
 
 
-def equicorrelated_information(n: int, rho: float) -> float:
-    """1ᵀ Σ⁻¹ 1 of n measurements of one value with Σ = I + ρ 11ᵀ (σ² = 1): the information
-    the best linear unbiased estimate draws from them, by direct linear algebra."""
-    cov = np.eye(n) + rho * np.ones((n, n))
+def equicorrelated_information(n: int, r: float) -> float:
+    """1ᵀ Σ⁻¹ 1 of n unit-variance measurements of one value whose errors correlate by r,
+    Σ = (1 − r) I + r 11ᵀ: the information their best linear unbiased estimate draws from them,
+    by direct linear algebra."""
+    cov = (1.0 - r) * np.eye(n) + r * np.ones((n, n))
     ones = np.ones(n)
     return float(ones @ np.linalg.solve(cov, ones))
 
 
 @settings(max_examples=40, deadline=None)
-@given(rho=st.floats(0.0, 5.0), n=st.integers(1, 12))
-def test_discount_is_the_information_each_push_adds_under_a_shared_bias(rho, n):
-    """g_ρ(n) = (I_n − I_{n−1}) / I_1 for n equicorrelated measurements (exact reference), so
-    the n pushes keep I_n / I_1 = n(1 + ρ)/(1 + nρ) of one push's evidence in all."""
-    info = [0.0] + [equicorrelated_information(k, rho) for k in range(1, n + 1)]
+@given(r=st.floats(0.0, 0.95), n=st.integers(1, 12))
+def test_discount_is_the_information_each_push_adds_under_a_shared_error(r, n):
+    """g_r(n) = (I_n − I_{n−1}) / I_1 for n equicorrelated measurements (exact reference), so
+    the n pushes keep I_n / I_1 = n / (1 + (n − 1) r) of one push's evidence in all."""
+    info = [0.0] + [equicorrelated_information(k, r) for k in range(1, n + 1)]
     nth = torch.arange(1, n + 1)
-    g = evidence_discount(nth, torch.tensor([rho], dtype=F64))[:, 0].numpy()
+    g = evidence_discount(nth, torch.tensor([r], dtype=F64))[:, 0].numpy()
     expected = np.diff(info) / info[1]
     np.testing.assert_allclose(g, expected, rtol=1e-9, atol=1e-12)
-    np.testing.assert_allclose(g.sum(), n * (1 + rho) / (1 + n * rho), rtol=1e-9)
+    np.testing.assert_allclose(g.sum(), n / (1 + (n - 1) * r), rtol=1e-9)
     assert g[0] == pytest.approx(1.0)
     assert np.all(np.diff(g) <= 1e-12)  # each push of a profile adds no more than the last
 
 
 def test_discount_per_direction_and_independent_pushes_keep_everything():
-    rho = torch.tensor([0.0, 0.25, 1.0], dtype=F64)
-    g = evidence_discount(torch.tensor([1, 2, 3]), rho)
+    r = torch.tensor([0.0, 0.2, 0.5], dtype=F64)
+    g = evidence_discount(torch.tensor([1, 2, 3]), r)
     assert g.shape == (3, 3)
-    torch.testing.assert_close(g[:, 0], torch.ones(3, dtype=F64))  # ρ = 0: every push counts
-    torch.testing.assert_close(g[1, 2], torch.tensor(2.0 / 6.0, dtype=F64))  # (1+1)/(3·2)
+    torch.testing.assert_close(g[:, 0], torch.ones(3, dtype=F64))  # r = 0: every push counts
+    torch.testing.assert_close(g[1, 2], torch.tensor(1.0 / 3.0, dtype=F64))  # 0.5 / (1.5 · 1)
     with pytest.raises(ValueError, match="starts at 1"):
-        evidence_discount(torch.tensor([0]), rho)
-    with pytest.raises(ValueError, match="≥ 0"):
-        evidence_discount(torch.tensor([1]), torch.tensor([-0.1]))
+        evidence_discount(torch.tensor([0]), r)
+    for bad in (-0.1, 1.0, float("nan")):
+        with pytest.raises(ValueError, match=r"\[0, 1\)"):
+            evidence_discount(torch.tensor([1]), torch.tensor([bad]))
 
 
 def test_the_nth_push_of_a_profile_keeps_its_weight_times_the_discount():
     weights = (1.0, 0.5, 0.5, 0.5, 0.2)
-    rho = (0.0, 0.25, 1.0, 1.0, 0.5)
-    s = InferenceSettings(profile_evidence_weights={"release": weights}, evidence_correlation=rho)
+    r = (0.0, 0.2, 0.5, 0.5, 0.25)
+    s = InferenceSettings(profile_evidence_weights={"release": weights}, evidence_correlation=r)
     torch.testing.assert_close(s.kept_evidence("release", 1), torch.tensor(weights))
     third = s.kept_evidence("release", 3)
     expected = torch.tensor(weights, dtype=F64) * evidence_discount(
-        torch.tensor(3), torch.tensor(rho, dtype=F64)
+        torch.tensor(3), torch.tensor(r, dtype=F64)
     )
     torch.testing.assert_close(third, expected.float())
-    assert third[0] == 1.0 and third[2] < 0.5 / 5  # ρ = 1: the third push adds 1/6 of the first
+    assert third[0] == 1.0 and third[2] < 0.5 / 5  # r = 0.5: the third push adds 1/6 of the first
     assert InferenceSettings().evidence_correlation == (0.0,) * 5  # saved models without it
-    with pytest.raises(ValueError, match="≥ 0"):
-        InferenceSettings(evidence_correlation=(0.0, -1.0, 0.0, 0.0, 0.0))
+    for bad in (-1.0, 1.0):
+        with pytest.raises(ValueError, match=r"\[0, 1\)"):
+            InferenceSettings(evidence_correlation=(0.0, bad, 0.0, 0.0, 0.0))

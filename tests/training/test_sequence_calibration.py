@@ -135,8 +135,8 @@ def test_max_weights_must_name_a_direction_and_allow_a_weight():
 
 
 def test_a_shared_error_discounts_the_later_pushes_of_a_profile(tmp_path_factory):
-    """run_sequences applies g_ρ(n) to the n-th push of each profile: ρ = 0 is the plain
-    weights; with a huge ρ only each profile's first push moves the belief."""
+    """run_sequences applies g_r(n) to the n-th push of each profile: r = 0 is the plain
+    weights; with r near 1 only each profile's first push moves the belief."""
     from pushtoknow.models.checkpoint import load_checkpoint
     from pushtoknow.training.calibration import SequenceCalibrationConfig, run_sequences
 
@@ -150,7 +150,7 @@ def test_a_shared_error_discounts_the_later_pushes_of_a_profile(tmp_path_factory
         plain = run_sequences(model, pt, seqs, table, model.inference, cfg, seed=0)
         zero = run_sequences(model, pt, seqs, table, model.inference, cfg, 0, torch.zeros(5))
         shared = run_sequences(
-            model, pt, seqs, table, model.inference, cfg, 0, torch.full((5,), 1e7)
+            model, pt, seqs, table, model.inference, cfg, 0, torch.full((5,), 1.0 - 1e-7)
         )
     for (m, c), (mz, cz) in zip(plain, zero, strict=True):
         torch.testing.assert_close(m, mz)
@@ -166,22 +166,42 @@ def test_a_shared_error_discounts_the_later_pushes_of_a_profile(tmp_path_factory
     assert repeats > 0  # the tiny data repeats a profile within a sequence
 
 
-def test_correlations_are_chosen_per_direction_with_the_weights(tmp_path_factory):
+def test_correlations_are_chosen_per_direction_with_the_weights(tmp_path_factory, monkeypatch):
+    """Each direction keeps the (w, r) of lowest sequence NLL over the common scan (r = 0) and
+    the scans of every other r, within its cap. The filter runs are replaced by an NLL known
+    per direction as a function of (w, r), so the choice has a unique right answer."""
     from pushtoknow.models.checkpoint import load_checkpoint
+    from pushtoknow.training import calibration
     from pushtoknow.training.calibration import SequenceCalibrationConfig, calibrate_evidence
 
-    model = load_checkpoint(tiny_run(tmp_path_factory)).eval()
+    best_w = torch.tensor([0.5, 1.0, 1.0, 0.5, 0.0], dtype=torch.float64)
+    best_r = torch.tensor([0.5, 0.0, 0.2, 0.2, 0.0], dtype=torch.float64)
+
+    def fake_run(model, val, seqs, table, settings, cfg, seed, correlation=None):
+        w = table[0].double()
+        r = torch.zeros(5, dtype=torch.float64) if correlation is None else correlation.double()
+        r = torch.where(w > 0, r, 0.0)  # a weight of 0 keeps nothing to discount
+        return [(((w - best_w).square() + (r - best_r).abs())[None], None)]
+
+    monkeypatch.setattr(calibration, "run_sequences", fake_run)
+    monkeypatch.setattr(calibration, "direction_nll", lambda mean, cov, truth: mean)
+    model = load_checkpoint(tiny_run(tmp_path_factory))
     pt = load_push_tensors(tiny_dataset(tmp_path_factory))
     cfg = SequenceCalibrationConfig(
-        weights=(0.0, 0.5, 1.0), correlations=(0.0, 1.0), num_sigma_points=SIGMA_POINTS
+        weights=(0.0, 0.5, 1.0),
+        correlations=(0.0, 0.5, 0.2, 0.5),  # a repeat is scanned once
+        max_weights={"log_mu_m": 0.5, "m_vs_mu": 0.5},
     )
     rows: list[dict] = []
-    with torch.no_grad():
-        chosen = calibrate_evidence(model, pt, cfg, seed=0, log=rows.append)
-    assert [r["correlation"] for r in rows] == ["0 0 0 0 0"] * 3 + ["1 1 1 1 1"] * 3
-    for k, d in enumerate(DIRECTIONS):
-        best = min(rows, key=lambda r: r[f"nll_{d}"])  # the first of equals: ρ = 0 wins ties
-        assert chosen.evidence_weights[k] == best["weight"]
-        assert chosen.evidence_correlation[k] == float(best["correlation"].split()[0])
-    with pytest.raises(ValueError, match="≥ 0"):
+    chosen = calibrate_evidence(model, pt, cfg, seed=0, log=rows.append)
+    assert [r["correlation"] for r in rows] == (
+        ["0 0 0 0 0"] * 3 + ["0.2 0.2 0.2 0.2 0.2"] * 3 + ["0.5 0.5 0.5 0.5 0.5"] * 3
+    )
+    # log μ·m: (0.5, 0.5) as set; m vs μ capped at 0.5 (r = 0); c_x (1, 0.2); c_y (0.5, 0.2);
+    # log I_z at w = 0 is the same for every r, so r stays 0
+    assert chosen.evidence_weights == (0.5, 0.5, 1.0, 0.5, 0.0)
+    assert chosen.evidence_correlation == (0.5, 0.0, 0.2, 0.2, 0.0)
+    with pytest.raises(ValueError, match=r"\[0, 1\)"):
         SequenceCalibrationConfig(correlations=(0.0, -0.5))
+    with pytest.raises(ValueError, match=r"\[0, 1\)"):
+        SequenceCalibrationConfig(correlations=(0.0, 1.0))

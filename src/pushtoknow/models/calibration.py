@@ -16,9 +16,9 @@ and the correlations of the posterior are kept. w = 1 is the filter's posterior,
 push's prior. `training.calibration` chooses w on validation objects' push sequences.
 
 Pushes of one profile share part of their model error (the same model, outline and object),
-so a second push of a profile tells less than the first: the n-th keeps w·g_ρ(n) of its
-evidence (`evidence_discount`), ρ per direction, chosen with w. ρ = 0: the pushes' errors are
-independent and every push keeps w.
+so a second push of a profile tells less than the first: the n-th keeps w·g_r(n) of its
+evidence (`evidence_discount`), with r the correlation of two such pushes' errors per
+direction, chosen with w. r = 0: the pushes' errors are independent and every push keeps w.
 """
 
 from __future__ import annotations
@@ -46,23 +46,26 @@ def evidence_basis() -> torch.Tensor:
 
 
 def evidence_discount(nth: torch.Tensor, correlation: torch.Tensor) -> torch.Tensor:
-    """g_ρ(n) (..., K): the share of the first push's evidence that the n-th push of a profile
-    adds when every push measures a direction as θ + b + εₙ, with a bias b common to the
-    pushes (variance ρσ²) and independent εₙ (σ²).
+    """g_r(n) (..., K): the share of the first push's evidence that the n-th push of a profile
+    adds when the errors of any two of the profile's pushes correlate by r (each reads a
+    direction as θ + b + εₙ, b common to the pushes, r = var b / (var b + var εₙ)).
 
-    n pushes then carry the information n / (σ²(1 + nρ)) (the variance of their mean is
-    σ²(ρ + 1/n)), so the n-th adds g_ρ(n) = (1 + ρ) / ((1 + nρ)(1 + (n − 1)ρ)) of the
-    first's: g(1) = 1, g_0 ≡ 1, and Σ_{i≤n} g(i) = n(1 + ρ)/(1 + nρ) → (1 + ρ)/ρ, a bound
-    however many pushes are made.
+    n such readings carry n / (1 + (n − 1) r) times one reading's information (1ᵀΣ⁻¹1 for
+    Σ = (1 − r) I + r 11ᵀ), so the n-th adds g_r(n) = (1 − r) / ((1 + (n − 1) r)(1 + (n − 2) r))
+    of the first's: g(1) = 1, g_0 ≡ 1, and however many pushes are made a profile keeps at most
+    1/r pushes' evidence. Applied push by push through `keep_evidence` this is an approximation:
+    the variance follows the information, but the mean weights a profile's n-th push by
+    g_r(n) where the exact estimate would weight its pushes equally.
     nth (...,) ≥ 1 (a push's count among its profile's, itself included); correlation (K,)
-    ρ ≥ 0 per direction.
+    r ∈ [0, 1) per direction.
     """
     if bool((nth < 1).any()):
         raise ValueError(f"a push's count among its profile's starts at 1, got {nth.min()}")
-    if bool((correlation < 0).any()):
-        raise ValueError(f"evidence correlations must be ≥ 0, got {correlation.tolist()}")
+    if not bool(((correlation >= 0) & (correlation < 1)).all()):
+        raise ValueError(f"evidence correlations must lie in [0, 1), got {correlation.tolist()}")
     n = nth.to(correlation.dtype).unsqueeze(-1)
-    return (1.0 + correlation) / ((1.0 + n * correlation) * (1.0 + (n - 1.0) * correlation))
+    r = correlation
+    return (1.0 - r) / ((1.0 + (n - 1.0) * r) * (1.0 + (n - 2.0) * r))
 
 
 def keep_evidence(

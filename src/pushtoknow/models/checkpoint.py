@@ -104,8 +104,8 @@ class InferenceSettings(Config):
     evidence_weights: the share of each push's evidence the parameter belief keeps, per
     direction of `models.calibration.DIRECTIONS` (1: the filter's posterior as it is);
     profile_evidence_weights: the same for pushes of a named speed profile, where its model
-    errors differ (`evidence_weights_for`); evidence_correlation: ρ per direction, the share
-    of a push's model error common to every push of its profile (the n-th push of a profile
+    errors differ (`evidence_weights_for`); evidence_correlation: r ∈ [0, 1) per direction, the
+    correlation of the model errors of two pushes of one profile (the n-th push of a profile
     keeps its weight × `models.calibration.evidence_discount`; 0: independent pushes)."""
 
     update_every: int = Field(1, ge=1)
@@ -138,9 +138,9 @@ class InferenceSettings(Config):
 
     @field_validator("evidence_correlation")
     @classmethod
-    def _non_negative(cls, v):
-        if not all(r >= 0.0 for r in v):
-            raise ValueError(f"evidence correlations must be ≥ 0, got {list(v)}")
+    def _correlations(cls, v):
+        if not all(0.0 <= r < 1.0 for r in v):
+            raise ValueError(f"evidence correlations must lie in [0, 1), got {list(v)}")
         return v
 
     def evidence_weights_for(self, profile: str) -> tuple[float, float, float, float, float]:
@@ -154,8 +154,8 @@ class InferenceSettings(Config):
     def kept_evidence(self, profile: str, nth: int) -> torch.Tensor:
         """(K,) the evidence weights of the `nth` (≥ 1) push of speed profile `profile`."""
         weights = torch.tensor(self.evidence_weights_for(profile), dtype=torch.float64)
-        rho = torch.tensor(self.evidence_correlation, dtype=torch.float64)
-        return (weights * evidence_discount(torch.tensor(nth), rho)).float()
+        r = torch.tensor(self.evidence_correlation, dtype=torch.float64)
+        return (weights * evidence_discount(torch.tensor(nth), r)).float()
 
 
 @dataclass

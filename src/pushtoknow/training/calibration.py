@@ -10,10 +10,12 @@ every push; each direction takes the weight with the lowest mean NLL over all pu
 give the lowest NLL summed over the directions. With `profile_rounds`, each speed profile's
 weights are then chosen in turn with the others' held (coordinate descent, as many rounds): a
 release push's model errors are not a constant push's, and a policy that mostly chooses one
-profile must not inherit weights set for the mix. With `correlations`, the share of a push's
-model error common to its profile's pushes (`models.calibration.evidence_discount`) is chosen
-per direction with the weights, between the common choice and the profile rounds: each
-candidate ρ is scanned over the weights, and a direction keeps the (w, ρ) of lowest NLL. With
+profile must not inherit weights set for the mix. With `correlations`, the correlation r of
+the model errors of two pushes of one profile (`models.calibration.evidence_discount`) is
+chosen per direction with the weights, between the common choice and the profile rounds: each
+candidate r is scanned over the weights, and a direction keeps the (w, r) of lowest NLL. As in
+every scan here, all directions share a run's setting and each direction is judged on its own
+NLL (the basis separates them; the combination chosen is not scored as a whole). With
 `max_weights`, a direction takes no weight above its cap (the first push's weight). The
 choice is made on validation objects only (never on the evaluation's held-out ones).
 """
@@ -52,8 +54,8 @@ class SequenceCalibrationConfig(Config):
     )
     correlations: tuple[float, ...] = Field(
         (0.0,),
-        description="candidate shares ρ ≥ 0 of a push's model error common to its profile's "
-        "pushes (0: independent pushes)",
+        description="candidate correlations r ∈ [0, 1) of the model errors of two pushes of "
+        "one profile, beside 0 (independent pushes), which is always one",
     )
     num_sigma_points: int = Field(32, ge=10)
     init_pose_std: tuple[float, float, float] = (1e-3, 1e-3, 0.01)
@@ -77,9 +79,9 @@ class SequenceCalibrationConfig(Config):
 
     @field_validator("correlations")
     @classmethod
-    def _non_negative(cls, v: tuple[float, ...]) -> tuple[float, ...]:
-        if not v or any(r < 0.0 for r in v):
-            raise ValueError(f"correlations must be one or more values ≥ 0, got {list(v)}")
+    def _correlations(cls, v: tuple[float, ...]) -> tuple[float, ...]:
+        if not v or not all(0.0 <= r < 1.0 for r in v):
+            raise ValueError(f"correlations must be one or more values in [0, 1), got {list(v)}")
         return v
 
     @model_validator(mode="after")
@@ -120,7 +122,7 @@ def run_sequences(
     """Parameter beliefs (mean (N, K), cov (N, K, K)) after each push of each sequence.
 
     weights: (P, K) evidence weights per speed profile (`PROFILES` order); correlation (K,):
-    ρ per direction (None: 0), the n-th push of a profile keeping weight × g_ρ(n)."""
+    r per direction (None: 0), the n-th push of a profile keeping weight × g_r(n)."""
     gen = torch.Generator().manual_seed(seed)
     filt = model.build_filter(
         cfg.num_sigma_points, settings.noise_scale, settings.dynamic_noise_scale
@@ -130,7 +132,7 @@ def run_sequences(
     mean_par = model.prior.mean.expand(n, k).clone()
     cov_par = model.prior.cov.expand(n, k, k).clone()
     pose_std = torch.tensor(cfg.init_pose_std)
-    rho = torch.zeros(k, dtype=weights.dtype) if correlation is None else correlation
+    corr = torch.zeros(k, dtype=weights.dtype) if correlation is None else correlation
     counts = torch.zeros(n, len(PROFILES), dtype=torch.long)
     rows = torch.arange(n)
     out = []
@@ -148,7 +150,7 @@ def run_sequences(
             pass
         profile = pt.action[push, 4].long()
         counts[rows, profile] += 1
-        kept = weights[profile] * evidence_discount(counts[rows, profile], rho.to(weights))
+        kept = weights[profile] * evidence_discount(counts[rows, profile], corr.to(weights))
         mean_par, cov_par = keep_evidence(mean_par, cov_par, mean[:, 3:], cov[:, 3:, 3:], kept)
         out.append((mean_par, cov_par))
     return out
@@ -178,7 +180,7 @@ def calibrate_evidence(
         for d in cfg.dynamic_noise_scales
     ]
     present = sorted(set(val.action[seqs.flatten(), 4].long().tolist()))
-    correlations = [float(r) for r in cfg.correlations if r != 0.0]
+    correlations = sorted({float(r) for r in cfg.correlations if r != 0.0})
     runs = len(candidates) + len(correlations) + cfg.profile_rounds * len(present)
     task = (
         progress.add_task("sequence calibration", total=len(cfg.weights) * runs)
@@ -191,15 +193,15 @@ def calibrate_evidence(
         table: torch.Tensor,
         rows: list[int],
         label: str,
-        rho: torch.Tensor,
+        corr: torch.Tensor,
     ):
         """(lowest NLL (K,), the weight index reaching it (K,)) over `cfg.weights`, each put in
-        `rows` of `table` (P, K), the other rows held; rho (K,) the correlations."""
+        `rows` of `table` (P, K), the other rows held; corr (K,) the correlations."""
         nll = []
         for w in cfg.weights:
             trial = table.clone()
             trial[rows] = float(w)
-            beliefs = run_sequences(model, val, seqs, trial, settings, cfg, seed, rho)
+            beliefs = run_sequences(model, val, seqs, trial, settings, cfg, seed, corr)
             per_push = torch.stack([direction_nll(m, c, truth).mean(0) for m, c in beliefs])
             nll.append(per_push.mean(0))  # (K,) mean over pushes and objects
             if log:
@@ -207,7 +209,7 @@ def calibrate_evidence(
                     {
                         "dynamic_noise_scale": settings.dynamic_noise_scale or "",
                         "profile": label,
-                        "correlation": " ".join(f"{r:g}" for r in rho.tolist()),
+                        "correlation": " ".join(f"{r:g}" for r in corr.tolist()),
                         "weight": w,
                         "pushes": seqs.shape[1],
                         "objects": seqs.shape[0],
@@ -235,27 +237,29 @@ def calibrate_evidence(
                     "evidence_correlation": tuple(independent.tolist()),
                 }
             )
+    if best_lowest is None:
+        raise ValueError("no setting of the sequence calibration gave a finite NLL")
     if correlations:
         weights = torch.tensor(best.evidence_weights, dtype=grid.dtype)
-        rho = independent.clone()
+        corr = independent.clone()
         for r in correlations:
-            lowest, index = scan(best, blank, every, "all", torch.full_like(rho, r))
+            lowest, index = scan(best, blank, every, "all", torch.full_like(corr, r))
             better = lowest < best_lowest
             best_lowest = torch.where(better, lowest, best_lowest)
             weights = torch.where(better, grid[index], weights)
-            rho = torch.where(better, torch.full_like(rho, r), rho)
+            corr = torch.where(better, torch.full_like(corr, r), corr)
         best = best.model_copy(
             update={
                 "evidence_weights": tuple(weights.tolist()),
-                "evidence_correlation": tuple(rho.tolist()),
+                "evidence_correlation": tuple(corr.tolist()),
             }
         )
     if cfg.profile_rounds:
         table = best.evidence_weight_table(grid.dtype)
-        rho = torch.tensor(best.evidence_correlation, dtype=grid.dtype)
+        corr = torch.tensor(best.evidence_correlation, dtype=grid.dtype)
         for _ in range(cfg.profile_rounds):
             for p in present:
-                table[p] = grid[scan(best, table, [p], PROFILES[p], rho)[1]]
+                table[p] = grid[scan(best, table, [p], PROFILES[p], corr)[1]]
         best = best.model_copy(
             update={
                 "profile_evidence_weights": {PROFILES[p]: tuple(table[p].tolist()) for p in present}
