@@ -47,6 +47,13 @@ def test_summary_matches_hand_computation():
     ]
     inside = np.abs(truth - mean[:, -1]) <= 1.6448536 * std[:, -1]
     assert s["coverage90"] == pytest.approx(inside.mean())
+    for k in range(3):  # after every push, per parameter; the last is the final coverage
+        inside_k = np.abs(truth - mean[:, k]) <= 1.6448536 * std[:, k]
+        cov = s["per_push"][k]["coverage90"]
+        assert cov["overall"] == pytest.approx(inside_k.mean())
+        assert cov["com_x"] == pytest.approx(inside_k[:, 2].mean())
+    assert s["per_push"][0]["coverage90"]["overall"] < s["per_push"][2]["coverage90"]["overall"]
+    assert s["per_push"][2]["coverage90"] == s["coverage90_per_param"]
     assert s["profile_share"] is None
     chosen = [["constant", "release"], ["release", "release"], ["constant", "constant"]] * 2
     run = MethodRun(mean, std, truth, [str(i) for i in range(6)], profiles=chosen)

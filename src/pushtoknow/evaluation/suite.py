@@ -131,8 +131,9 @@ def summarise_method(
     run: MethodRun, folds: list[np.ndarray], footprints: list | None = None
 ) -> dict:
     """NRMSE of the final estimate (mean ± std over folds, and over all objects), μ·m NRMSE,
-    68%/90% coverage, NRMSE after every push k = 0..K (all objects), and, given the objects'
-    true footprints, how many of the N·(K+1) estimates were physically impossible."""
+    68%/90% coverage, NRMSE and 90% coverage after every push k = 0..K (all objects), and,
+    given the objects' true footprints, how many of the N·(K+1) estimates were physically
+    impossible."""
     k_last = run.mean.shape[1] - 1
     m, t = run.mean[:, k_last], run.truth
     prod = None if run.product is None else run.product[:, k_last]
@@ -145,6 +146,7 @@ def summarise_method(
         p = None if run.product is None else run.product[:, k]
         row = nrmse(run.mean[:, k], t)
         row["mu_m"] = product_nrmse(run.mean[:, k], t, p)
+        row["coverage90"] = coverage(run.zscores(k), 0.9)
         per_push.append(row)
     fold_mu_m = [product_nrmse(m[g], t[g], None if prod is None else prod[g]) for g in folds]
     return {

@@ -82,6 +82,22 @@ def per_push_table(methods: dict, param: str) -> str:
     return "\n".join(markdown_table(["method", *(f"k={j}" for j in range(k))], rows))
 
 
+def coverage_by_push_table(methods: dict) -> str:
+    """90% coverage per parameter after the first push and after the last (all objects), one
+    row per method that reports every push (not e.g. the oracle: final estimate only)."""
+    k = max(len(m["per_push"]) for m in methods.values())
+    header = ["method", *(f"{h}, push 1" for h in HEADERS[:-1])]
+    header += [f"{h}, push {k - 1}" for h in HEADERS[:-1]]
+    rows = []
+    for name, m in methods.items():
+        pp = m["per_push"]
+        if len(pp) != k or "coverage90" not in pp[1]:
+            continue
+        cells = [f"{pp[j]['coverage90'][p]:.2f}" for j in (1, k - 1) for p in COLUMNS[:-1]]
+        rows.append([name, *cells])
+    return "\n".join(markdown_table(header, rows))
+
+
 def interpretation(methods: dict, primary: str, novel: dict | None = None) -> str:
     """A paragraph reading the held-out numbers (and, given, the novel ones) in the light of
     the testbed's physics (docs/PHYSICS.md)."""
@@ -224,6 +240,15 @@ def render_report(results: dict, command: str, appendices: list[str] = ()) -> st
                 "Novel = unseen shapes (pentagon, trapezoid, 2:1 ellipse, L-shape) alternating "
                 "with catalogue shapes, all with continuous parameters within the catalogue "
                 "ranges.",
+                "",
+            ]
+    out += ["## 90% coverage after the first push and after the last", ""]
+    for set_name, title in (("heldout", "Held-out catalogue objects"), ("novel", "Novel objects")):
+        if set_name in results["sets"]:
+            out += [
+                f"**{title}**",
+                "",
+                coverage_by_push_table(results["sets"][set_name]["methods"]),
                 "",
             ]
     out += ["## The paper's numbers (Sim-Robotac, Table III)", "", paper_table(), ""]
