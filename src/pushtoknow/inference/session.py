@@ -18,6 +18,7 @@ Per push k:
 
 from __future__ import annotations
 
+from collections import Counter
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -204,12 +205,7 @@ class ObjectEstimator:
         self._prev: tuple[np.ndarray, np.ndarray] | None = None  # (S_0, pose0) of last push
         self._last_pose: np.ndarray | None = None
         self._footprint: torch.Tensor | None = None  # (V, 2) object frame, first push's S_0
-        self._pushes_of: dict[str, int] = {}  # pushes filtered so far, per speed profile
-
-    def next_kept_evidence(self, profile: str) -> torch.Tensor:
-        """(K,) the share of its evidence the next push keeps if it has speed profile
-        `profile` (`InferenceSettings.kept_evidence`)."""
-        return self.model.inference.kept_evidence(profile, self._pushes_of.get(profile, 0) + 1)
+        self._pushes_of: Counter[str] = Counter()  # pushes filtered so far, per speed profile
 
     def start_belief(self, pose0: np.ndarray) -> tuple[torch.Tensor, torch.Tensor]:
         """Belief (mean (1, D), cov (1, D, D)) at a push's start: N(pose0, init std²) × the
@@ -314,9 +310,10 @@ class ObjectEstimator:
                 )
                 mean, cov, _ = filt.update(mean, cov, z, ctx, noise)
             poses.append(mean[0, :3].numpy().copy())
-        profile = rec.push.profile
-        weights = self.next_kept_evidence(profile)
-        self._pushes_of[profile] = self._pushes_of.get(profile, 0) + 1
+        self._pushes_of[rec.push.profile] += 1
+        weights = self.model.inference.kept_evidence(
+            rec.push.profile, self._pushes_of[rec.push.profile]
+        )
         param_mean, param_cov = keep_evidence(
             self.param_mean[None], self.param_cov[None], mean[:, 3:], cov[:, 3:, 3:], weights
         )

@@ -45,6 +45,14 @@ def evidence_basis() -> torch.Tensor:
     return torch.as_tensor(basis, dtype=torch.float32)
 
 
+def check_correlations(values) -> None:
+    """Raise ValueError unless every evidence correlation r (an iterable of floats) lies in
+    [0, 1) (r = 1 would make a profile's later pushes worthless and g undefined)."""
+    values = list(values)
+    if not all(0.0 <= r < 1.0 for r in values):
+        raise ValueError(f"evidence correlations must lie in [0, 1), got {values}")
+
+
 def evidence_discount(nth: torch.Tensor, correlation: torch.Tensor) -> torch.Tensor:
     """g_r(n) (..., K): the share of the first push's evidence that the n-th push of a profile
     adds when the errors of any two of the profile's pushes correlate by r (each reads a
@@ -61,8 +69,7 @@ def evidence_discount(nth: torch.Tensor, correlation: torch.Tensor) -> torch.Ten
     """
     if bool((nth < 1).any()):
         raise ValueError(f"a push's count among its profile's starts at 1, got {nth.min()}")
-    if not bool(((correlation >= 0) & (correlation < 1)).all()):
-        raise ValueError(f"evidence correlations must lie in [0, 1), got {correlation.tolist()}")
+    check_correlations(correlation.flatten().tolist())
     n = nth.to(correlation.dtype).unsqueeze(-1)
     r = correlation
     return (1.0 - r) / ((1.0 + (n - 1.0) * r) * (1.0 + (n - 2.0) * r))

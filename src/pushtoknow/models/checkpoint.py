@@ -23,7 +23,7 @@ from pushtoknow.common.config import Config
 from pushtoknow.common.errors import CheckpointError, first_line
 from pushtoknow.filters.base import BeliefFilter, FilterConfig
 from pushtoknow.filters.gaussian import symmetrize
-from pushtoknow.models.calibration import evidence_discount
+from pushtoknow.models.calibration import check_correlations, evidence_discount
 from pushtoknow.models.learned import (
     FilterKind,
     LearnedModels,
@@ -139,8 +139,7 @@ class InferenceSettings(Config):
     @field_validator("evidence_correlation")
     @classmethod
     def _correlations(cls, v):
-        if not all(0.0 <= r < 1.0 for r in v):
-            raise ValueError(f"evidence correlations must lie in [0, 1), got {list(v)}")
+        check_correlations(v)
         return v
 
     def evidence_weights_for(self, profile: str) -> tuple[float, float, float, float, float]:

@@ -30,6 +30,7 @@ from pydantic import Field, field_validator, model_validator
 from pushtoknow.common.config import Config
 from pushtoknow.models.calibration import (
     DIRECTIONS,
+    check_correlations,
     evidence_basis,
     evidence_discount,
     keep_evidence,
@@ -80,8 +81,9 @@ class SequenceCalibrationConfig(Config):
     @field_validator("correlations")
     @classmethod
     def _correlations(cls, v: tuple[float, ...]) -> tuple[float, ...]:
-        if not v or not all(0.0 <= r < 1.0 for r in v):
-            raise ValueError(f"correlations must be one or more values in [0, 1), got {list(v)}")
+        if not v:
+            raise ValueError("correlations: give one or more candidates in [0, 1)")
+        check_correlations(v)
         return v
 
     @model_validator(mode="after")
