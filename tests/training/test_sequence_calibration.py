@@ -4,6 +4,8 @@ import math
 
 import pytest
 import torch
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from pushtoknow.models.calibration import DIRECTIONS
 from pushtoknow.training.calibration import direction_nll, push_sequences
@@ -205,3 +207,61 @@ def test_correlations_are_chosen_per_direction_with_the_weights(tmp_path_factory
         SequenceCalibrationConfig(correlations=(0.0, -0.5))
     with pytest.raises(ValueError, match=r"\[0, 1\)"):
         SequenceCalibrationConfig(correlations=(0.0, 1.0))
+
+
+def test_choose_weights_takes_the_lowest_nll_within_the_cap():
+    from pushtoknow.training.calibration import choose_weights
+
+    weights = torch.tensor([0.0, 0.5, 1.0], dtype=torch.float64)
+    nll = torch.tensor([[1.0, 2.0], [0.5, 1.0], [0.2, 3.0]])[:, None, :].expand(3, 4, 2)
+    allowed = torch.ones(3, 2, dtype=torch.bool)
+    lowest, index = choose_weights(nll, weights, allowed, tolerance_se=0.0)
+    assert index.tolist() == [2, 1]
+    torch.testing.assert_close(lowest, torch.tensor([0.2, 1.0]))
+    allowed[2, 0] = False  # direction 0 capped below 1.0
+    assert choose_weights(nll, weights, allowed, 0.0)[1].tolist() == [1, 1]
+    broken = nll.clone()
+    broken[1, 0, 1] = float("nan")  # a non-finite NLL never wins
+    assert choose_weights(broken, weights, allowed, 0.0)[1].tolist() == [1, 0]
+
+
+def test_choose_weights_keeps_evidence_only_where_it_pays_beyond_the_noise():
+    """The one-standard-error rule: a smaller weight whose NLL is within `tolerance_se`
+    standard errors (of the paired per-object difference) of the lowest is chosen instead;
+    a gain that every object shows is kept however small."""
+    from pushtoknow.training.calibration import choose_weights
+
+    gen = torch.Generator().manual_seed(0)
+    n = 100
+    weights = torch.tensor([0.0, 0.2], dtype=torch.float64)
+    allowed = torch.ones(2, 2, dtype=torch.bool)
+    base = torch.randn(n, 2, generator=gen)
+    # direction 0: weight 0.2 lowers the mean NLL by 0.01 with per-object noise 0.5 (SE 0.05);
+    # direction 1: by 0.01 on every object alike (SE ≈ 0.0001)
+    gain = torch.stack([0.01 + 0.5 * torch.randn(n, generator=gen), torch.full((n,), 0.01)], -1)
+    gain[:, 0] += 0.01 - gain[:, 0].mean()  # exactly 0.01 on average
+    gain[:, 1] += 1e-3 * torch.randn(n, generator=gen)
+    nll = torch.stack([base, base - gain])
+    assert choose_weights(nll, weights, allowed, 0.0)[1].tolist() == [1, 1]
+    lowest, index = choose_weights(nll, weights, allowed, 1.0)
+    assert index.tolist() == [0, 1]
+    torch.testing.assert_close(lowest, torch.stack([nll[0, :, 0].mean(), nll[1, :, 1].mean()]))
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.integers(2, 5), st.integers(2, 30), st.floats(0.0, 3.0), st.integers(0, 2**31 - 1))
+def test_choose_weights_never_exceeds_the_lowest_nlls_weight(w, n, tolerance, seed):
+    from pushtoknow.training.calibration import choose_weights
+
+    gen = torch.Generator().manual_seed(seed)
+    weights = torch.rand(w, generator=gen, dtype=torch.float64)
+    nll = torch.randn(w, n, 3, generator=gen)
+    allowed = torch.ones(w, 3, dtype=torch.bool)
+    lowest, index = choose_weights(nll, weights, allowed, tolerance)
+    best = nll.mean(1).argmin(0)
+    assert (weights[index] <= weights[best]).all()
+    diff_se = (nll - nll[best, :, [0, 1, 2]].T[None]).std(1) / math.sqrt(n)
+    bound = nll.mean(1).min(0).values + tolerance * diff_se[index, [0, 1, 2]]
+    assert (lowest <= bound + 1e-6).all()
+    if tolerance == 0.0:
+        torch.testing.assert_close(lowest, nll.mean(1).min(0).values)

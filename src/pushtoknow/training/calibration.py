@@ -16,8 +16,13 @@ chosen per direction with the weights, between the common choice and the profile
 candidate r is scanned over the weights, and a direction keeps the (w, r) of lowest NLL. As in
 every scan here, all directions share a run's setting and each direction is judged on its own
 NLL (the basis separates them; the combination chosen is not scored as a whole). With
-`max_weights`, a direction takes no weight above its cap (the first push's weight). The
-choice is made on validation objects only (never on the evaluation's held-out ones).
+`max_weights`, a direction takes no weight above its cap (the first push's weight). With
+`tolerance_se`, a weight whose NLL lies within that many standard errors of the lowest (the
+standard error over the objects of its paired difference to the lowest) ties with it, and the
+smallest tied weight is chosen (the one-standard-error rule): a direction keeps evidence only
+where the validation objects show that it pays, so a parameter the pushes barely reveal keeps
+its prior's width. The choice is made on validation objects only (never on the evaluation's
+held-out ones).
 """
 
 from __future__ import annotations
@@ -28,6 +33,7 @@ import torch
 from pydantic import Field, field_validator, model_validator
 
 from pushtoknow.common.config import Config
+from pushtoknow.filters.shapes import expect_shape
 from pushtoknow.models.calibration import (
     DIRECTIONS,
     check_correlations,
@@ -57,6 +63,12 @@ class SequenceCalibrationConfig(Config):
         (0.0,),
         description="candidate correlations r ∈ [0, 1) of the model errors of two pushes of "
         "one profile, beside 0 (independent pushes), which is always one",
+    )
+    tolerance_se: float = Field(
+        0.0,
+        ge=0.0,
+        description="standard errors of the NLL within which a smaller weight ties with the "
+        "lowest NLL's and is chosen (0: the lowest NLL's weight)",
     )
     num_sigma_points: int = Field(32, ge=10)
     init_pose_std: tuple[float, float, float] = (1e-3, 1e-3, 0.01)
@@ -166,6 +178,30 @@ def direction_nll(mean: torch.Tensor, cov: torch.Tensor, truth: torch.Tensor) ->
     return 0.5 * (err.square() / var + var.log() + math.log(2 * math.pi))
 
 
+def choose_weights(
+    nll: torch.Tensor, weights: torch.Tensor, allowed: torch.Tensor, tolerance_se: float
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """(mean NLL (K,), index (K,)) of the weight each direction takes.
+
+    nll: (W, N, K) per candidate weight, object and direction; weights: (W,); allowed: (W, K).
+    The lowest mean NLL among the allowed weights wins, unless a smaller allowed weight lies
+    within `tolerance_se` standard errors of it (of the paired per-object difference): then
+    the smallest such weight. Non-finite means never win."""
+    w = weights.shape[0]
+    expect_shape(nll, "nll", [("W", w), ("N", None), ("K", None)])
+    expect_shape(allowed, "allowed", [("W", w), ("K", nll.shape[2])])
+    mean = nll.mean(1)
+    mean = mean.masked_fill(~allowed | ~torch.isfinite(mean), math.inf)
+    lowest, best = mean.min(0)
+    diff = nll - nll.gather(0, best[None, None, :].expand(1, *nll.shape[1:]))
+    n = nll.shape[1]
+    se = diff.std(1).nan_to_num(0.0) / math.sqrt(n) if n > 1 else torch.zeros_like(mean)
+    tied = torch.isfinite(mean) & (mean <= lowest + tolerance_se * se)
+    order = weights[:, None].expand_as(mean).masked_fill(~tied, math.inf)
+    index = torch.where(torch.isfinite(lowest), order.argmin(0), best)
+    return mean.gather(0, index[None]).squeeze(0), index
+
+
 def calibrate_evidence(
     model: TrainedModel,
     val: PushTensors,
@@ -204,8 +240,8 @@ def calibrate_evidence(
             trial = table.clone()
             trial[rows] = float(w)
             beliefs = run_sequences(model, val, seqs, trial, settings, cfg, seed, corr)
-            per_push = torch.stack([direction_nll(m, c, truth).mean(0) for m, c in beliefs])
-            nll.append(per_push.mean(0))  # (K,) mean over pushes and objects
+            per_push = torch.stack([direction_nll(m, c, truth) for m, c in beliefs])
+            nll.append(per_push.mean(0))  # (N, K): each object's mean over its pushes
             if log:
                 log(
                     {
@@ -216,11 +252,14 @@ def calibrate_evidence(
                         "pushes": seqs.shape[1],
                         "objects": seqs.shape[0],
                     }
-                    | {f"nll_{d}": float(v) for d, v in zip(DIRECTIONS, nll[-1], strict=True)}
+                    | {
+                        f"nll_{d}": float(v)
+                        for d, v in zip(DIRECTIONS, nll[-1].mean(0), strict=True)
+                    }
                 )
             if progress:
                 progress.advance(task)
-        return torch.stack(nll).masked_fill(~allowed, math.inf).min(0)
+        return choose_weights(torch.stack(nll), grid, allowed, cfg.tolerance_se)
 
     allowed = cfg.allowed()
     # float64 tables hold the grid's weights exactly, so the chosen ones are its values
