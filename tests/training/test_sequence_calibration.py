@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from pushtoknow.models.calibration import DIRECTIONS
-from pushtoknow.training.calibration import direction_nll, push_sequences
+from pushtoknow.training.calibration import choose_weights, direction_nll, push_sequences
 from pushtoknow.training.data import load_push_tensors
 from tiny_training import DATA_OBJECTS, DATA_PUSHES, SIGMA_POINTS, tiny_dataset, tiny_run
 
@@ -210,8 +210,6 @@ def test_correlations_are_chosen_per_direction_with_the_weights(tmp_path_factory
 
 
 def test_choose_weights_takes_the_lowest_nll_within_the_cap():
-    from pushtoknow.training.calibration import choose_weights
-
     weights = torch.tensor([0.0, 0.5, 1.0], dtype=torch.float64)
     nll = torch.tensor([[1.0, 2.0], [0.5, 1.0], [0.2, 3.0]])[:, None, :].expand(3, 4, 2)
     allowed = torch.ones(3, 2, dtype=torch.bool)
@@ -229,8 +227,6 @@ def test_choose_weights_keeps_evidence_only_where_it_pays_beyond_the_noise():
     """The one-standard-error rule: a smaller weight whose NLL is within `tolerance_se`
     standard errors (of the paired per-object difference) of the lowest is chosen instead;
     a gain that every object shows is kept however small."""
-    from pushtoknow.training.calibration import choose_weights
-
     gen = torch.Generator().manual_seed(0)
     n = 100
     weights = torch.tensor([0.0, 0.2], dtype=torch.float64)
@@ -251,8 +247,6 @@ def test_choose_weights_keeps_evidence_only_where_it_pays_beyond_the_noise():
 @settings(max_examples=50, deadline=None)
 @given(st.integers(2, 5), st.integers(2, 30), st.floats(0.0, 3.0), st.integers(0, 2**31 - 1))
 def test_choose_weights_never_exceeds_the_lowest_nlls_weight(w, n, tolerance, seed):
-    from pushtoknow.training.calibration import choose_weights
-
     gen = torch.Generator().manual_seed(seed)
     weights = torch.rand(w, generator=gen, dtype=torch.float64)
     nll = torch.randn(w, n, 3, generator=gen)
