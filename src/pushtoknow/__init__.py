@@ -1,10 +1,7 @@
 """pushtoknow: learn an object's mass, friction, centre of mass and inertia by pushing it.
 
-Layers (lower never imports higher):
-common → testbed → geometry → filters → models → active → training → inference → evaluation,
-plus baselines, datasets, bench and cli. `filters` holds the filter math and the abstract model
-interfaces (torchfilter style); `models` implements them with networks + geometry. Neither
-imports MuJoCo or the testbed.
+The layers, and which may import which, are stated in docs/DESIGN.md §1 (checked by
+tests/test_layers.py and tests/test_import_cycles.py).
 """
 
 __version__ = "0.1.0"

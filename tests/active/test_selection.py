@@ -23,7 +23,8 @@ from pushtoknow.active.selection import (
 )
 from pushtoknow.common.camera import CameraModel
 from pushtoknow.filters import FilterConfig
-from pushtoknow.models.learned import PushContext, build_filter
+from pushtoknow.models.context import PushContext
+from pushtoknow.models.learned import build_filter
 
 
 def _coupling_context(couplings):

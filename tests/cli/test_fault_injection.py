@@ -86,6 +86,8 @@ CASES = [
     (["simulate", "--objects", "1", "--out", "/proc/no/such"], "no such file or directory"),
     (["simulate", "--objects", "1", "--out", "{tmp}/r", "--ray", "127.0.0.1:1"], "no Ray cluster"),
     (["evaluate-heldout", "--objects", "1", "--ray", "nowhere"], "expected auto, HOST:PORT"),
+    (["simulate", "--out", "{tmp}/rs", "--objects-from", "random:x"], "random:SEED needs"),
+    (["push", "--object", "random:1"], "must be random:SEED:I"),
 ]
 
 

@@ -136,7 +136,8 @@ def test_identification_rollouts_on_ray_equal_the_local_ones(ray_runner):
     from pushtoknow.identification.replay import ReplayScene, RolloutPool
     from pushtoknow.identification.synthetic import simulate_pushes
     from pushtoknow.testbed.config import SimConfig
-    from pushtoknow.testbed.objects import load_object_spec, resolve_shape
+    from pushtoknow.testbed.object_refs import load_object_spec
+    from pushtoknow.testbed.objects import resolve_shape
 
     sim = SimConfig(render=False).model_copy(
         update={"push": SimConfig().push.model_copy(update={"horizon": 2.0})}

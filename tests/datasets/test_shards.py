@@ -215,3 +215,17 @@ def test_novel_objects_are_the_evaluations_kind():
     assert specs != select_objects("novel", 6, 24)
     with pytest.raises(ObjectSpecError, match="'novel'"):
         select_objects("novle", 2, 0)
+
+
+def test_random_objects_for_the_dataset_seed_or_their_own():
+    """`--objects-from random` draws the random-shape objects of the dataset's seed,
+    `random:SEED` those of SEED; anything else after `random:` is refused in one line."""
+    from pushtoknow.testbed.random_shapes import random_objects
+
+    assert [s.to_dict() for s in select_objects("random", 3, 5)] == [
+        s.to_dict() for s in random_objects(3, 5)
+    ]
+    assert select_objects("random:9", 3, 5) == random_objects(3, 9)
+    for bad in ("random:", "random:x", "random:-1", "random:1:2"):
+        with pytest.raises(ObjectSpecError, match="random:SEED needs"):
+            select_objects(bad, 2, 0)

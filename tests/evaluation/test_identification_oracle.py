@@ -54,6 +54,10 @@ def test_oracle_row_from_the_pushes_a_model_made():
     assert abs(run.product[0, 0] / (0.4 * 0.6) - 1) > 0.02  # the prior row does not know it
     summary = summarise_method(run, [np.array([0])])
     assert set(summary["coverage90_per_param"]) >= {"mass", "inertia", "overall"}
+    # each row's 90% interval, from the distribution its mean comes from: the mean lies inside
+    assert run.lower.shape == run.upper.shape == (1, 2, 5)
+    assert (run.lower < run.upper).all()
+    assert summary["outside_interval"] == 0
 
 
 def test_the_oracle_reruns_a_cached_run_without_push_tracks(tmp_path, monkeypatch):
@@ -89,6 +93,7 @@ def test_the_oracle_row_is_cached_by_the_pushes_it_replays(tmp_path, monkeypatch
     """A second evaluation on the same pushes reuses the oracle row; other pushes recompute it."""
     from pushtoknow.evaluation import identification, suite
     from pushtoknow.evaluation.heldout import HeldoutRun
+    from pushtoknow.evaluation.metrics import MethodRun
 
     def base(track_value: float) -> HeldoutRun:
         z = np.zeros((1, 2, 5))
@@ -101,8 +106,9 @@ def test_the_oracle_row_is_cached_by_the_pushes_it_replays(tmp_path, monkeypatch
     def fake_oracle(b, objects, sim_config, seed, workers, progress):
         calls.append(1)
         v = float(len(calls))
-        return suite.MethodRun(np.full((1, 2, 5), v), np.ones((1, 2, 5)), np.zeros((1, 5)),
-                               ["o"], np.full((1, 2), v), 2.5, np.zeros((1, 2, 5)))  # fmt: skip
+        full = np.full((1, 2, 5), v)
+        return MethodRun(full, np.ones((1, 2, 5)), np.zeros((1, 5)), ["o"], np.full((1, 2), v),
+                         2.5, np.zeros((1, 2, 5)), lower=full - 1, upper=full + 1)  # fmt: skip
 
     monkeypatch.setattr(identification, "oracle_run", fake_oracle)
     cache = tmp_path / "oracle.npz"
@@ -112,6 +118,8 @@ def test_the_oracle_row_is_cached_by_the_pushes_it_replays(tmp_path, monkeypatch
     assert len(calls) == 1  # from the cache
     np.testing.assert_array_equal(again.mean, first.mean)
     np.testing.assert_array_equal(again.product, first.product)
+    np.testing.assert_array_equal(again.lower, first.lower)  # the intervals are cached too
+    np.testing.assert_array_equal(again.upper, first.upper)
     assert again.seconds_per_object == 2.5 and again.ids == ["o"]
     other = suite._oracle_run(base(1.0), *args)  # other recorded tracks
     assert len(calls) == 2 and other.mean[0, 0, 0] == 2.0
@@ -129,7 +137,8 @@ def test_the_oracle_row_is_cached_by_the_pushes_it_replays(tmp_path, monkeypatch
 def test_product_relative_error_of_the_final_estimates():
     import numpy as np
 
-    from pushtoknow.evaluation.suite import MethodRun, product_relative_error
+    from pushtoknow.evaluation.metrics import MethodRun
+    from pushtoknow.evaluation.suite import product_relative_error
 
     truth = np.array([[0.5, 0.4, 0, 0, 1e-3], [1.0, 0.5, 0, 0, 1e-3]])
     product = np.array([[0.3, 0.202], [0.4, 0.45]])  # final: +1 % and −10 %

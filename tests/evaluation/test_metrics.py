@@ -72,3 +72,35 @@ def test_product_nrmse_zero_when_product_right():
     truth = np.array([[0.5, 0.6, 0, 0, 1e-3]])
     pred = np.array([[0.6, 0.5, 0, 0, 1e-3]])  # wrong m and μ, right μ·m
     assert product_nrmse(pred, truth) == pytest.approx(0.0, abs=1e-12)
+
+
+def test_estimates_outside_their_interval_are_counted_once_each():
+    from pushtoknow.evaluation.metrics import estimates_outside_interval
+
+    lower = np.tile([0.4, 0.4, -0.01, -0.01, 8e-4], (2, 3, 1))
+    upper = np.tile([0.6, 0.6, 0.01, 0.02, 1.2e-3], (2, 3, 1))
+    mean = 0.5 * (lower + upper)
+    assert estimates_outside_interval(mean, lower, upper) == 0
+    mean[0, 1, 0] = 0.7  # mass above its interval ...
+    mean[0, 1, 3] = -0.05  # ... and c_y below its own: one estimate, counted once
+    mean[1, 2, 4] = 7e-4  # I_z below
+    assert estimates_outside_interval(mean, lower, upper) == 2
+
+
+def test_a_mean_at_a_bound_is_inside_its_interval():
+    from pushtoknow.evaluation.metrics import estimates_outside_interval
+
+    lower = np.array([[0.4, 0.4, -0.01, -0.01, 8e-4]])
+    upper = np.array([[0.6, 0.6, 0.01, 0.02, 1.2e-3]])
+    assert estimates_outside_interval(lower, lower, upper) == 0
+    assert estimates_outside_interval(upper, lower, upper) == 0
+    rounded = upper * (1 + 1e-12)  # rounding past the bound: inside
+    assert estimates_outside_interval(rounded, lower, upper) == 0
+    beyond = upper.copy()
+    beyond[0, 2] += 1e-6  # 1 µm past c_x's upper bound: outside
+    assert estimates_outside_interval(beyond, lower, upper) == 1
+    nan = lower.copy()
+    nan[0, 1] = np.nan  # lies in no interval
+    assert estimates_outside_interval(nan, lower, upper) == 1
+    with pytest.raises(ValueError, match="shape"):
+        estimates_outside_interval(lower, lower[:, :4], upper)

@@ -213,21 +213,21 @@ def test_report_truth_and_errors(report, forest_dir):
 
 
 def test_filter_runs_the_pushes_in_order_carrying_the_posterior(report, real_dir, run_dir):
-    """The report's filter estimates are one `ObjectEstimator` run over the pushes in file
+    """The report's filter estimates are one `LearnedFilterEstimator` run over the pushes in file
     order, each starting at its recorded pose, the posterior carried (not reset per push)."""
     from pushtoknow.evaluation.real import real_inference_config
-    from pushtoknow.inference.session import ObjectEstimator
+    from pushtoknow.inference.learned_filter import LearnedFilterEstimator
     from pushtoknow.models.checkpoint import load_checkpoint
 
     real = load_real_object(real_dir)
     model = load_checkpoint(run_dir)
-    est = ObjectEstimator(model, real_inference_config(3), seed=0)
+    est = LearnedFilterEstimator(model, real_inference_config(3), seed=0)
     carried, fresh = [], []
     for k, rec in enumerate(real["records"]):
-        est.filter_push(rec, View.before(rec), rec.pose[0])
+        est.update(rec, View.before(rec), rec.pose[0])
         carried.append(est.estimate(k + 1).as_dict())
-        alone = ObjectEstimator(model, real_inference_config(1), seed=0)
-        alone.filter_push(rec, View.before(rec), rec.pose[0])
+        alone = LearnedFilterEstimator(model, real_inference_config(1), seed=0)
+        alone.update(rec, View.before(rec), rec.pose[0])
         fresh.append(alone.estimate(1).as_dict())
     assert report.filter["per_push"] == carried
     assert report.filter["per_push"][1:] != fresh[1:]

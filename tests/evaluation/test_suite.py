@@ -9,10 +9,9 @@ import pytest
 from typer.testing import CliRunner
 
 from pushtoknow.cli.main import app
-from pushtoknow.evaluation.metrics import nrmse
+from pushtoknow.evaluation.metrics import MethodRun, nrmse
 from pushtoknow.evaluation.suite import (
     EvaluationConfig,
-    MethodRun,
     fold_indices,
     summarise_method,
 )
@@ -110,6 +109,7 @@ def test_evaluate_cli_reduced_config(tmp_path_factory, tmp_path):
         assert 0.0 <= m["coverage90"] <= 1.0
         assert len(m["per_push"]) == 3  # prior + 2 pushes
         assert 0 <= m["impossible_estimates"] <= m["estimates"] == 4 * 3  # objects × (1 + pushes)
+        assert m["outside_interval"] == 0, name  # every mean inside its own interval (§2)
     # every method starts from the same prior-mean estimate at k = 0 except the filter's prior
     assert methods["forest"]["per_push"][0] == methods["prior-mean"]["per_push"][0]
     full = json.loads((out / "results.json").read_text())
@@ -118,6 +118,8 @@ def test_evaluate_cli_reduced_config(tmp_path_factory, tmp_path):
     assert all((Path(p).stat().st_size > 1000) for p in full["figures"].values())
     report = (out / "RESULTS.md").read_text()
     assert "| forest-visnet |" in report and "Novel objects (2 objects)" in report
+    header = next(line for line in report.splitlines() if line.startswith("| method"))
+    assert "| impossible | outside interval |" in header
     # a second run reads the cached inference runs and gives identical numbers
     again = runner.invoke(app, args)
     assert again.exit_code == 0, again.output
@@ -146,3 +148,60 @@ def test_cache_key_follows_the_checkpoint_contents(tmp_path):
     assert _cache_key(run, "uniform", ["catalogue:1"], cfg, ("constant", "release")) != key
     (run / "model.pt").write_bytes(b"retrained model")  # same path, new weights
     assert _cache_key(run, "uniform", ["catalogue:1"], cfg, c) != key
+
+
+def test_summary_counts_estimates_outside_their_interval():
+    from pushtoknow.evaluation.suite import gaussian_run
+
+    truth = np.tile([0.5, 0.5, 0.0, 0.0, 1e-3], (4, 1))
+    mean = np.repeat(truth[:, None], 3, 1)
+    std = np.full_like(mean, 0.01)
+    folds = [np.array([0, 1]), np.array([2, 3])]
+    ids = [str(i) for i in range(4)]
+    assert summarise_method(MethodRun(mean, std, truth, ids), folds)["outside_interval"] is None
+    lower, upper = mean - 0.02, mean + 0.03
+    lower[1, 2, [0, 4]] = mean[1, 2, [0, 4]] + 1e-3  # two parameters, one estimate
+    lower[3, 0, 2] = mean[3, 0, 2]  # at its bound: inside
+    run = MethodRun(mean, std, truth, ids, lower=lower, upper=upper)
+    s = summarise_method(run, folds)
+    assert s["outside_interval"] == 1 and s["estimates"] == 12
+    # the forest and the prior: Gaussian in SI, mean ± 1.645·std, symmetric, so 0
+    g = gaussian_run(mean, std, truth, ids)
+    np.testing.assert_allclose(g.upper - g.mean, 1.6448536 * std)
+    assert summarise_method(g, folds)["outside_interval"] == 0
+
+
+def test_an_inference_cache_without_intervals_is_recomputed(tmp_path, monkeypatch):
+    """A run cached before intervals were recorded (under the key of that format) is not read as
+    if it had them: it is recomputed, and the new cache keeps them."""
+    import hashlib
+
+    from pushtoknow.evaluation import suite
+    from pushtoknow.evaluation.heldout import HeldoutRun
+
+    def run(intervals: bool) -> HeldoutRun:
+        z = np.zeros((1, 2, 5))
+        return HeldoutRun(z, z, z, np.zeros((1, 2)), np.zeros((1, 5)), ["o"], [1.0],
+                          np.zeros((1, 1, 3)), np.zeros((1, 1, 3)), [["constant"]],
+                          lower=z - 1 if intervals else None,
+                          upper=z + 1 if intervals else None)  # fmt: skip
+
+    calls = []
+    monkeypatch.setattr(suite, "evaluate_heldout", lambda *a, **k: calls.append(1) or run(True))
+    cfg = suite.EvaluationConfig(heldout_objects=1, novel_objects=0)
+    model = tmp_path / "model.pt"
+    model.write_bytes(b"weights")
+    cache = tmp_path / "run.npz"
+    old = hashlib.sha256(b"weights")  # the key before the cache format was part of it
+    old.update(json.dumps(["uniform", cfg.pushes, cfg.seed, None, ["o"], ["constant"]]).encode())
+    suite._save_run(cache, old.hexdigest()[:16], run(False))
+    args = (model, "uniform", ["o"], cfg, ("constant",), cache, None)
+    got = suite._inference_run(*args)
+    assert len(calls) == 1 and got.lower is not None
+    again = suite._inference_run(*args)  # from the new cache, intervals included
+    assert len(calls) == 1
+    np.testing.assert_array_equal(again.lower, -np.ones((1, 2, 5)))
+    np.testing.assert_array_equal(again.upper, np.ones((1, 2, 5)))
+    key = suite._cache_key(model, "uniform", ["o"], cfg, ("constant",))
+    suite._save_run(cache, key, run(False))  # a run without intervals: None, never guessed
+    assert suite._load_run(cache, key).lower is None

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from scipy.stats import norm
 
 from pushtoknow.common.params import ObjectParams, normalise_params, space_scale
 from pushtoknow.identification.config import IdentifyConfig
@@ -84,6 +85,33 @@ def test_centred_constant_push_leaves_inertia_at_the_prior_width():
     # the prior's 90% interval of I_z in SI, for comparison
     assert res.upper[i] - res.lower[i] > 0.9e-3
     assert abs(res.mu_m / 0.25 - 1) < 0.02
+
+
+def test_an_l_shapes_com_is_reported_from_the_belief_within_its_hull():
+    """The CoM of an L in its notch (inside the convex hull, off the footprint, 2.3 mm from the
+    hull less the margin): mean, std and interval are those of the posterior truncated to the
+    hull less `COM_MARGIN` (`common.estimate`), so each mean lies in its interval, the CoM in
+    the hull; the z-scores agree with the intervals; the MAP point stays simulable."""
+    from shapely.geometry import Point, Polygon
+
+    from pushtoknow.common.estimate import com_region, estimate_from_belief
+    from pushtoknow.identification.fit import LEVEL
+    from pushtoknow.testbed.objects import NOVEL_SHAPES
+
+    spec = ObjectSpec(NOVEL_SHAPES["l_shape"], ObjectParams(0.5, 0.5, 0.0275, 0.0275, 1.0e-3))
+    records = simulate_pushes(spec, ["constant"], seed=0, config=SHORT, centred=True)
+    res = identify(records, _scene(spec), CFG, seed=0)
+    region = com_region(spec.footprint.vertices, COM_MARGIN)
+    want = estimate_from_belief(res.mean_norm, res.cov_norm, region, LEVEL)
+    for name in ("mean", "std", "lower", "upper"):
+        np.testing.assert_array_equal(getattr(res, name), getattr(want, name))
+    assert ((res.lower <= res.mean) & (res.mean <= res.upper)).all(), (res.lower, res.upper)
+    hull = Polygon(region).buffer(1e-9)
+    assert hull.covers(Point(*res.mean[2:4])) and hull.covers(Point(*res.estimate[2:4]))
+    truth = spec.params.as_array()
+    inside = (res.lower <= truth) & (truth <= res.upper)
+    z = res.zscore(truth)
+    np.testing.assert_array_equal(inside, np.abs(z) <= norm.ppf(0.5 + LEVEL / 2))
 
 
 def _off_centre_pushes():

@@ -127,3 +127,14 @@ def test_identify_with_the_footprint_from_the_mask(tiny):
     assert np.hypot(*(res.mean[2:4] - SPEC.params.as_array()[2:4])) < 0.015
     z = res.zscore(SPEC.params.as_array())
     assert np.isfinite(z).all() and (np.abs(z[2:4]) < 2).all()
+    # the CoM is reported from the posterior truncated to the fit footprint's hull less the
+    # testbed's margin, moved into the record's frame like the CoM itself
+    from pushtoknow.common.estimate import com_region, estimate_from_belief
+    from pushtoknow.testbed.objects import COM_MARGIN
+
+    scene = replay_scene(obj, "from-mask")
+    region = com_region(scene.footprint.vertices, COM_MARGIN) + np.array(scene.frame_offset)
+    want = estimate_from_belief(res.mean_norm, res.cov_norm, region, res.level)
+    np.testing.assert_array_equal(res.mean, want.mean)
+    np.testing.assert_array_equal(res.upper, want.upper)
+    assert ((res.lower <= res.mean) & (res.mean <= res.upper)).all()

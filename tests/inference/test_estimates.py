@@ -6,7 +6,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from pushtoknow.common.params import PARAM_NAMES, normalise_params
-from pushtoknow.inference.session import belief_to_estimate
+from pushtoknow.inference.estimator import belief_to_estimate
 
 POSITIVE = [PARAM_NAMES.index(k) for k in ("mass", "friction", "inertia")]
 
@@ -14,7 +14,7 @@ POSITIVE = [PARAM_NAMES.index(k) for k in ("mass", "friction", "inertia")]
 @settings(max_examples=200, deadline=None)
 @given(
     mean=st.lists(st.floats(-20.0, 20.0), min_size=5, max_size=5),
-    log_std=st.lists(st.floats(-8.0, 1.5), min_size=5, max_size=5),
+    log_std=st.lists(st.floats(-8.0, 1.0), min_size=5, max_size=5),  # wider: refused
     corr_seed=st.integers(0, 2**16),
 )
 def test_extreme_beliefs_never_give_an_impossible_estimate(mean, log_std, corr_seed):
@@ -51,19 +51,22 @@ def test_interval_is_asymmetric_in_si_and_holds_its_level():
     assert np.allclose(normalise_params(lo)[m], -1.6448536 * 0.5)
 
 
-def test_reported_com_is_kept_a_margin_inside_even_in_a_notch():
+def test_a_com_belief_outside_the_hull_is_reported_inside_its_interval_and_the_hull():
+    """An L, its CoM belief centred in the notch and beyond the outline (the learned filter's
+    two reported failures): the estimate's CoM mean lies in the hull less the margin and inside
+    its own interval."""
     from shapely.geometry import Point, Polygon
 
-    from pushtoknow.inference.session import keep_inside
+    from pushtoknow.common.estimate import com_region
 
-    ell = np.array([[0, 0], [0.1, 0], [0.1, 0.04], [0.04, 0.04], [0.04, 0.1], [0, 0.1]]) - 0.03
-    poly = Polygon(ell)
-    margin = 0.009
-    inside = np.array([0.0, -0.01])  # deep inside: unchanged
-    np.testing.assert_array_equal(keep_inside(inside, ell, margin), inside)
-    for p in ([0.03, 0.03], [0.012, 0.012], [0.2, -0.2], [-0.029, 0.0]):  # notch, edge, far
-        q = keep_inside(np.array(p), ell, margin)
-        assert poly.contains(Point(*q))
-        assert poly.exterior.distance(Point(*q)) >= margin - 1e-6
-    thin = np.array([[0, 0], [0.01, 0], [0.01, 0.001], [0, 0.001]])
-    np.testing.assert_allclose(keep_inside(np.array([1.0, 1.0]), thin, margin), [0.005, 0.0005])
+    ell = [[-0.03875, -0.03875], [0.06125, -0.03875], [0.06125, 0.00125], [0.00125, 0.00125],
+           [0.00125, 0.06125], [-0.03875, 0.06125]]  # fmt: skip
+    region = com_region(np.array(ell), 0.003)
+    for com in ([0.008, 0.008], [0.09, -0.01], [-0.0039, 0.0]):
+        mean = normalise_params(np.array([0.6, 0.5, *com, 8e-4]))
+        cov = np.diag([0.1, 0.1, 0.4, 0.4, 0.1])
+        e = belief_to_estimate(5, torch.tensor(mean), torch.tensor(cov), com_region=region)
+        lo, hi = e.interval()
+        assert np.all((lo <= e.mean) & (e.mean <= hi))
+        assert Polygon(region).buffer(1e-9).contains(Point(*e.mean[2:4]))
+        assert e.as_dict()["com_x"]["interval90"] == [lo[2], hi[2]]

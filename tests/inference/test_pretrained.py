@@ -4,14 +4,16 @@ import json
 from pathlib import Path
 
 import numpy as np
+import pytest
 
-from pushtoknow.inference import InferenceConfig, infer_object
+from pushtoknow.inference import InferenceConfig, infer_object, infer_simulated
 from pushtoknow.models.calibration import DIRECTIONS
 from pushtoknow.models.checkpoint import load_checkpoint
 from pushtoknow.pretrained import pretrained_dir, resolve_model_path
 from pushtoknow.testbed.config import TESTBED_VERSION
 from pushtoknow.testbed.executor import SimulatedExecutor
-from pushtoknow.testbed.objects import catalogue_split, demo_object_id, load_object_spec
+from pushtoknow.testbed.object_refs import load_object_spec
+from pushtoknow.testbed.objects import catalogue_split, demo_object_id
 from pushtoknow.training.pipeline import TrainConfig, visnet_config_for
 
 REPO = Path(__file__).resolve().parents[2]
@@ -79,3 +81,22 @@ def test_shipped_model_estimates_one_push():
     true = res.records[0].pose[:, :2]
     err = np.linalg.norm(res.poses[0][:, :2] - true, axis=1)
     assert err.max() < 0.2 * np.linalg.norm(true[-1] - true[0])
+
+
+@pytest.mark.slow
+def test_the_learned_filter_behind_the_estimator_interface_gives_the_beliefs_it_gave_before():
+    """Same seed, same result: the shipped model's beliefs and chosen pushes on held-out rect2
+    (2 pushes, uniform and active-entropy) equal, bit for bit, those recorded before the
+    learned filter moved behind `inference.Estimator` (tests/inference/data)."""
+    golden = json.loads(
+        (Path(__file__).parent / "data" / "learned_filter_catalogue117_seed0.json").read_text()
+    )
+    model = load_checkpoint(resolve_model_path("pretrained"))
+    for policy, want in golden.items():
+        cfg = InferenceConfig(
+            pushes=2, policy=policy, candidates=4, profiles=("constant", "release")
+        )
+        res = infer_simulated(model, load_object_spec("catalogue:117"), cfg, seed=0)
+        assert [e.push.as_array().tolist() for e in res.estimates] == want["pushes"]
+        assert [e.mean_norm.tolist() for e in res.estimates] == want["mean_norm"]
+        assert [e.cov_norm.tolist() for e in res.estimates] == want["cov_norm"]

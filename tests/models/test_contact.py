@@ -19,7 +19,7 @@ from pushtoknow.models.contact import (
     pressure_moment_arm,
     radius_of_gyration,
 )
-from pushtoknow.testbed.objects import load_object_spec
+from pushtoknow.testbed.object_refs import load_object_spec
 
 F64 = torch.float64
 H = 0.04  # half side of the test square (m)

@@ -12,7 +12,8 @@ from pushtoknow.models.physics import CONTACT_REACH, CONTACT_SOFTNESS, GyrationA
 from pushtoknow.perception.footprint import footprint_seen
 from pushtoknow.testbed.config import SimConfig
 from pushtoknow.testbed.executor import SimulatedExecutor
-from pushtoknow.testbed.objects import load_object_spec, novel_objects
+from pushtoknow.testbed.object_refs import load_object_spec
+from pushtoknow.testbed.objects import novel_objects
 from pushtoknow.testbed.push import Push
 
 F64 = torch.float64

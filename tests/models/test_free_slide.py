@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 
 from pushtoknow.common.params import GRAVITY, ObjectParams
 from pushtoknow.models.contact import free_slide, radius_of_gyration
-from pushtoknow.models.learned import PushContext, with_pad_track
+from pushtoknow.models.context import PushContext, with_pad_track
 from pushtoknow.models.physics import (
     CONTACT_REACH,
     CONTACT_SOFTNESS,

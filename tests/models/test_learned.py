@@ -6,7 +6,8 @@ def test_pad_features_are_in_the_object_frame():
     import torch
 
     from pushtoknow.common.camera import CameraModel
-    from pushtoknow.models.learned import PushContext, sigma_point_features
+    from pushtoknow.models.context import PushContext
+    from pushtoknow.models.encoding import sigma_point_features
 
     th = 1.2
     state = torch.tensor([[[0.1, -0.05, th, 0, 0, 0, 0, 0]]])
@@ -30,7 +31,8 @@ def test_dynamic_noise_scale_applies_to_the_samples_of_a_dynamic_phase():
     import torch
 
     from pushtoknow.common.errors import ShapeError
-    from pushtoknow.models.learned import PushContext, ScaledObservationNoise, with_pad_track
+    from pushtoknow.models.context import PushContext, with_pad_track
+    from pushtoknow.models.learned import ScaledObservationNoise
 
     class UnitNoise(torch.nn.Module):
         obs_dim = 5

@@ -11,7 +11,8 @@ from pushtoknow.common.errors import ShapeError
 from pushtoknow.common.params import GRAVITY, normalise_params
 from pushtoknow.filters import DualFilter
 from pushtoknow.models import build_filter, build_learned_models
-from pushtoknow.models.learned import LearnedModelsConfig, pad_windows, with_pad_track
+from pushtoknow.models.context import pad_windows, with_pad_track
+from pushtoknow.models.learned import LearnedModelsConfig
 
 F64 = torch.float64
 DT = 0.1

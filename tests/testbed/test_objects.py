@@ -7,11 +7,11 @@ import pytest
 
 from pushtoknow.common.errors import ObjectSpecError
 from pushtoknow.common.params import CATALOGUE_GRID, PARAM_RANGES
+from pushtoknow.testbed.object_refs import load_object_spec
 from pushtoknow.testbed.objects import (
     ObjectSpec,
     build_catalogue,
     inertia_upper_bound,
-    load_object_spec,
     novel_objects,
     sample_continuous_object,
 )

@@ -7,7 +7,7 @@ import pytest
 
 from pushtoknow.testbed.config import PadConfig, PushConfig, SimConfig
 from pushtoknow.testbed.executor import SimulatedExecutor
-from pushtoknow.testbed.objects import load_object_spec
+from pushtoknow.testbed.object_refs import load_object_spec
 from pushtoknow.testbed.push import PAD_CLEARANCE, Push, pad_positions
 
 FAST = SimConfig(push=PushConfig(horizon=1.5), render=False)

@@ -5,12 +5,12 @@ import numpy as np
 import pytest
 import torch
 
+from pushtoknow.inference import InferenceConfig, infer_object
 from pushtoknow.inference.policies import make_policy
-from pushtoknow.inference.session import InferenceConfig, infer_object
 from pushtoknow.models.checkpoint import load_checkpoint
 from pushtoknow.models.physics import PhysicsDynamics, PhysicsObservation
 from pushtoknow.testbed.executor import SimulatedExecutor
-from pushtoknow.testbed.objects import load_object_spec
+from pushtoknow.testbed.object_refs import load_object_spec
 from pushtoknow.training.pipeline import TrainConfig, train_model
 from tiny_training import SIM, TINY_TRAIN, tiny_dataset
 
@@ -60,7 +60,7 @@ def test_physics_structured_model_trains_reloads_and_estimates(
             cfg,
             0,
             initial_pose=ex.initial_pose,
-            policy=make_policy("active-kl", SIM),
+            policy=make_policy("active-kl"),
         )
     finally:
         ex.close()

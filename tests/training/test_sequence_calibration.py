@@ -53,8 +53,10 @@ def test_dynamic_noise_scale_is_chosen_with_the_weights(tmp_path_factory):
     score = {
         s: sum(min(r[f"nll_{d}"] for r in rs) for d in DIRECTIONS) for s, rs in by_scale.items()
     }
-    best = min(score, key=score.get)
-    assert (chosen.dynamic_noise_scale or "") == best
+    # the chosen candidate's score is the lowest, up to the float32 rounding of the sums (the
+    # candidates tie exactly where every chosen evidence weight is 0)
+    lowest = min(score.values())
+    assert score[chosen.dynamic_noise_scale or ""] <= lowest + 1e-6 * abs(lowest)
     assert chosen.noise_scale == model.inference.noise_scale
     assert set(chosen.evidence_weights) <= {0.0, 1.0}
     # the dynamic scale changes the posterior (release pushes have dynamic samples)

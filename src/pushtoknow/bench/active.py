@@ -28,12 +28,8 @@ from pushtoknow.active.selection import SCORES
 from pushtoknow.bench import machine_description
 from pushtoknow.common.camera import CameraModel
 from pushtoknow.filters.base import FilterConfig
-from pushtoknow.models.learned import (
-    LearnedModelsConfig,
-    PushContext,
-    build_filter,
-    with_pad_track,
-)
+from pushtoknow.models.context import PushContext, with_pad_track
+from pushtoknow.models.learned import LearnedModelsConfig, build_filter
 from pushtoknow.testbed.config import PushConfig, TactileConfig
 from pushtoknow.testbed.push import PROFILES, Push, pad_positions, release_points
 

@@ -4,7 +4,7 @@ Inference (no autograd), CPU, 64×64 masks, C sigma points, randomly initialised
 steady-state steps of a run (see `_time_steps`). Two numbers:
 * step_ms_median: one object (B = 1), median wall time of one step;
 * object_steps_per_s: B objects batched in one step, B / median step time.
-Both for each encoder variant (see `pushtoknow.models.learned`): "mean" with a 32 px crop
+Both for each encoder variant (see `pushtoknow.models.encoding`): "mean" with a 32 px crop
 (the default design) and "per_sigma" on the full 64 px image (the paper).
 """
 
@@ -20,12 +20,9 @@ import torch
 
 from pushtoknow.common.camera import CameraModel
 from pushtoknow.filters.base import FilterConfig
-from pushtoknow.models.learned import (
-    EncodingConfig,
-    LearnedModelsConfig,
-    PushContext,
-    build_filter,
-)
+from pushtoknow.models.context import PushContext
+from pushtoknow.models.encoding import EncodingConfig
+from pushtoknow.models.learned import LearnedModelsConfig, build_filter
 from pushtoknow.models.networks import EncoderConfig
 
 TARGET_STEP_MS = 10.0

@@ -13,7 +13,7 @@ def run_sim_bench(pushes: int = 6, seed: int = 0, object_source: str = "catalogu
     from pushtoknow.geometry.affordances import sample_push_affordances
     from pushtoknow.testbed.config import SimConfig
     from pushtoknow.testbed.executor import SimulatedExecutor
-    from pushtoknow.testbed.objects import load_object_spec
+    from pushtoknow.testbed.object_refs import load_object_spec
     from pushtoknow.testbed.push import Push
 
     cfg = SimConfig()

@@ -1,21 +1,31 @@
-"""`pushtoknow` commands: benchmarks (bench sim, physics, filter, active)."""
+"""`pushtoknow` commands: benchmarks (bench sim, physics, filter, active, scaling, estimator)."""
 
 from __future__ import annotations
 
 import json
+import statistics
 from pathlib import Path
 
 import typer
 
 from pushtoknow.cli.options import (
+    EstimatorChoice,
+    PolicyChoice,
+    estimator_option,
+    policy_option,
     ray_option,
     seed_option,
     sigma_points_option,
 )
 from pushtoknow.cli.shared import (
+    PROFILES_HELP,
     bench_app,
+    console,
+    err_console,
     fail,
+    parse_profiles,
     print_result,
+    save_and_print_json,
 )
 from pushtoknow.common.errors import PushToKnowError
 
@@ -118,3 +128,130 @@ def bench_scaling(
         print(json.dumps(report.to_dict()))
     else:
         print(table)
+
+
+@bench_app.command("estimator")
+def bench_estimator_cmd(
+    estimator: EstimatorChoice = estimator_option(),
+    objects: int = typer.Option(
+        4, "--objects", min=1, help="random objects random:SEED:0 … random:SEED:N-1"
+    ),
+    objects_seed: int = typer.Option(
+        2026, "--objects-seed", min=0, help="SEED of the random objects"
+    ),
+    object_refs: list[str] = typer.Option(
+        [],
+        "--object",
+        metavar="REF",
+        help="an object reference (catalogue:ID, random:SEED:I, a file); repeat for more; "
+        "replaces the random objects",
+    ),
+    pushes: int = typer.Option(5, "--pushes", min=1),
+    profiles: str = typer.Option(None, "--profiles", help=PROFILES_HELP),
+    policy: PolicyChoice = policy_option(),
+    model: str = typer.Option("pretrained", "--model", help="RUN directory or 'pretrained'"),
+    threads: int | None = typer.Option(
+        None,
+        "--threads",
+        min=1,
+        help="torch intra-op threads (default: torch's, one per core); on a machine shared "
+        "with other work, 1 avoids spin-waiting workers",
+    ),
+    seed: int = seed_option(),
+    as_json: bool = typer.Option(False, "--json", help="print the report as JSON"),
+    out: Path | None = typer.Option(None, "--out", help="write the report's JSON here"),
+):
+    """An estimator's speed (seconds per update, per object) and accuracy (normalised error,
+    90% coverage, means outside their own interval) on simulated objects."""
+    from pushtoknow.bench.estimator import bench_estimator, default_objects
+    from pushtoknow.models.checkpoint import load_checkpoint
+    from pushtoknow.pretrained import resolve_model_path
+
+    if out is not None and out.is_dir():
+        raise typer.BadParameter(f"--out {out}: is a folder, not a file")
+    chosen = parse_profiles(profiles) if profiles is not None else None
+    refs = list(object_refs) or default_objects(objects, objects_seed)
+    try:
+        trained = load_checkpoint(resolve_model_path(model))
+    except (PushToKnowError, OSError) as e:
+        fail(e)
+    n = len(refs)
+
+    def progress(i, row) -> None:
+        err_console.print(
+            f"object {i + 1}/{n} {row.name or row.ref}: {len(row.update_s)} updates, "
+            f"median {statistics.median(row.update_s):.2f} s, object {row.object_s:.1f} s",
+            highlight=False,
+        )
+
+    err_console.print(
+        f"bench estimator {estimator.value}: {n} objects, {pushes} pushes, "
+        f"policy {policy.value}, seed {seed}",
+        highlight=False,
+    )
+    try:
+        report = bench_estimator(
+            trained,
+            estimator.value,
+            refs,
+            pushes,
+            chosen or trained.profiles,
+            policy.value,
+            seed,
+            on_object=progress,
+            threads=threads,
+        )
+    except PushToKnowError as e:
+        fail(e)
+    if not save_and_print_json(report.to_json(), out, as_json):
+        _print_estimator_bench(report)
+
+
+def _print_estimator_bench(report) -> None:
+    from rich.table import Table
+
+    from pushtoknow.common.params import PARAM_NAMES
+
+    s = report.summary
+    per_object = Table(
+        title=f"{report.estimator}: per object, final estimate after {report.pushes} pushes "
+        "(per parameter: |error| / catalogue range, and the truth's z-score)",
+        title_justify="left",
+    )
+    per_object.add_column("object", no_wrap=True)
+    per_object.add_column("update s (median)", justify="right")
+    per_object.add_column("object s", justify="right")
+    for p in PARAM_NAMES:
+        per_object.add_column(p, justify="right", no_wrap=True)
+    per_object.add_column("means outside interval", justify="right")
+    for r in report.objects:
+        per_object.add_row(
+            r.name or r.ref,
+            f"{statistics.median(r.update_s):.3g}",
+            f"{r.object_s:.3g}",
+            *(f"{r.error_norm[p]:.3f} ({r.zscore[p]:+.1f})" for p in PARAM_NAMES),
+            str(sum(not v for v in r.mean_inside_interval.values())),
+        )
+    console.print(per_object)
+    accuracy = Table(title="summary: accuracy", title_justify="left")
+    accuracy.add_column("parameter")
+    accuracy.add_column("mean |err|/range", justify="right")
+    accuracy.add_column("90% coverage", justify="right")
+    for p in PARAM_NAMES:
+        accuracy.add_row(p, f"{s.error_norm_mean[p]:.3f}", f"{s.coverage90[p]:.2f}")
+    accuracy.add_row("overall", f"{s.error_norm_overall:.3f}", "")
+    console.print(accuracy)
+    print_result(
+        {
+            "update_s_median": s.update_s_median,
+            "update_s_max": s.update_s_max,
+            "object_s_median": s.object_s_median,
+            "updates": s.updates,
+            "means_outside_interval": s.means_outside_interval,
+            "cpu_count": report.cpu_count,
+            "torch_threads": report.torch_threads,
+            "machine": report.machine,
+        },
+        False,
+        "summary: speed",
+    )

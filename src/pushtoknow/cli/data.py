@@ -41,6 +41,7 @@ def simulate(
         help="catalogue | catalogue-train | catalogue-test | continuous | "
         "catalogue-train+continuous (alternately) | novel (the evaluation's novel objects: "
         "unseen shapes and catalogue shapes alternately, continuous parameters) | "
+        "random[:SEED] (random shapes, continuous parameters; SEED defaults to --seed) | "
         "FILE (JSON/YAML specs)",
     ),
     profiles: str = typer.Option(
@@ -163,7 +164,8 @@ def collect(
     objects_from: str = typer.Option(
         "catalogue-train",
         "--objects-from",
-        help="catalogue | catalogue-train | catalogue-test | continuous | novel | FILE",
+        help="catalogue | catalogue-train | catalogue-test | continuous | novel | "
+        "random[:SEED] | FILE",
     ),
     first_object_index: int = typer.Option(
         0, "--first-object-index", min=0, help="skip this many objects of the seeded order"

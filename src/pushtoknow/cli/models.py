@@ -10,7 +10,9 @@ from rich.console import Console
 from rich.table import Table
 
 from pushtoknow.cli.options import (
+    EstimatorChoice,
     PolicyChoice,
+    estimator_option,
     policy_option,
     seed_option,
     sigma_points_option,
@@ -38,7 +40,7 @@ def push_cmd(
     as_json: bool = typer.Option(False, "--json"),
 ):
     """Simulate one push on an object, print its summary and save a strip of frames."""
-    from pushtoknow.testbed.objects import load_object_spec
+    from pushtoknow.testbed.object_refs import load_object_spec
     from pushtoknow.viz import one_push, save_push_strip
 
     out = image_out(out)
@@ -167,31 +169,34 @@ def run_inference(
     strip: bool = False,
     sigma_points: int | None = None,
     profiles: tuple[str, ...] | None = None,
+    estimator: str = "vt-addf",
 ) -> dict:
     """Shared by `infer` and `demo`: K pushes on the testbed, tables, plot, JSON. profiles:
     None for those the model was trained on."""
     from pushtoknow.datasets.shards import write_run_pushes
-    from pushtoknow.inference.session import InferenceConfig, infer_simulated
+    from pushtoknow.inference import InferenceConfig, infer_simulated
     from pushtoknow.models.checkpoint import load_checkpoint
     from pushtoknow.pretrained import resolve_model_path
-    from pushtoknow.testbed.objects import load_object_spec
+    from pushtoknow.testbed.object_refs import load_object_spec
     from pushtoknow.viz import plot_estimates, save_push_strip
 
     out_folder(out)
     model = load_checkpoint(resolve_model_path(model_ref))
     spec = load_object_spec(object_ref)
     truth = spec.params.as_array()
-    show = Console(stderr=True) if as_json else console
+    show = Console(stderr=True, emoji=False) if as_json else console
     sim_cfg = model.sim_config
     cfg = InferenceConfig(
         pushes=pushes,
         policy=policy,
         num_sigma_points=sigma_points,
         profiles=model.profiles if profiles is None else profiles,
+        estimator=estimator,
     )
     show.print(
         f"[bold]{spec.name or 'object'}[/] ({spec.shape if isinstance(spec.shape, str) else ''})"
-        f", model {model.variant} ({model_ref}), policy {policy}, {pushes} pushes, seed {seed}"
+        f", estimator {estimator}, model {model.variant} ({model_ref}), policy {policy}, "
+        f"{pushes} pushes, seed {seed}"
     )
     result = infer_simulated(
         model,
@@ -229,6 +234,7 @@ def infer(
     as_json: bool = typer.Option(False, "--json", help="print the estimates as JSON"),
     sigma_points: int = sigma_points_option(help="default: the model's (100)"),
     profiles: str = typer.Option(None, "--profiles", help=PROFILES_HELP),
+    estimator: EstimatorChoice = estimator_option(),
 ):
     """Push an object K times on the testbed and estimate its parameters after every push."""
     run_inference(
@@ -241,6 +247,7 @@ def infer(
         as_json,
         sigma_points=sigma_points,
         profiles=None if profiles is None else parse_profiles(profiles),
+        estimator=estimator.value,
     )
 
 

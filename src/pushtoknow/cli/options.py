@@ -6,6 +6,7 @@ import enum
 
 import typer
 
+from pushtoknow.common.estimators import ESTIMATOR_NAMES
 from pushtoknow.common.policies import POLICY_NAMES
 
 SEED_HELP = "random seed (≥ 0): same seed, same result on the CPU"
@@ -29,6 +30,20 @@ def policy_option(default: str | None = "uniform", help: str = "push policy"):
     """The `--policy` option of every command that pushes with a policy (choices from
     `inference.policies.POLICY_NAMES`)."""
     return typer.Option(None if default is None else PolicyChoice(default), "--policy", help=help)
+
+
+EstimatorChoice = enum.Enum("EstimatorChoice", {e: e for e in ESTIMATOR_NAMES}, type=str)
+
+
+def estimator_option(default: str = "vt-addf"):
+    """The `--estimator` option of every command that estimates with a model (choices from
+    `common.estimators.ESTIMATOR_NAMES`)."""
+    return typer.Option(
+        EstimatorChoice(default),
+        "--estimator",
+        help="vt-addf: the paper's learned dual filter; physics: the dual filter whose model is "
+        "the simulator (docs/DESIGN.md §12)",
+    )
 
 
 RAY_HELP = (

@@ -16,8 +16,8 @@ from rich.table import Table
 from pushtoknow.cli.options import seed_option, sigma_points_option
 from pushtoknow.common.errors import PushToKnowError
 
-console = Console()
-err_console = Console(stderr=True, soft_wrap=True)
+console = Console(emoji=False)
+err_console = Console(stderr=True, soft_wrap=True, emoji=False)
 
 
 def estimate_real(

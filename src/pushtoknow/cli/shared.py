@@ -29,8 +29,8 @@ dataset_app = typer.Typer(no_args_is_help=True, help="Inspect datasets.")
 bench_app = typer.Typer(no_args_is_help=True, help="Benchmarks (speed and memory).")
 app.add_typer(dataset_app, name="dataset")
 app.add_typer(bench_app, name="bench")
-console = Console()
-err_console = Console(stderr=True, soft_wrap=True)
+console = Console(emoji=False)  # object names such as random:7:0:kite are not emoji codes
+err_console = Console(stderr=True, soft_wrap=True, emoji=False)
 
 
 def _version(value: bool) -> None:

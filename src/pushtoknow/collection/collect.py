@@ -108,8 +108,8 @@ def collection_objects(cfg: CollectionConfig) -> list[ObjectSpec]:
 
 def collect_object(model, spec: ObjectSpec, index: int, cfg: CollectionConfig) -> ObjectEpisode:
     """K pushes on one object chosen by `cfg.policy` with `model`'s filter running."""
+    from pushtoknow.inference import InferenceConfig, infer_object
     from pushtoknow.inference.policies import make_policy
-    from pushtoknow.inference.session import InferenceConfig, infer_object
     from pushtoknow.testbed.executor import SimulatedExecutor
 
     rng = np.random.default_rng([cfg.seed, 3, index])
@@ -120,7 +120,7 @@ def collect_object(model, spec: ObjectSpec, index: int, cfg: CollectionConfig) -
         candidates=cfg.candidates,
         num_sigma_points=cfg.num_sigma_points,
     )
-    policy = make_policy(cfg.policy, cfg.sim, icfg.active_horizon_fraction)  # the executor's
+    policy = make_policy(cfg.policy, icfg.active_horizon_fraction)
     ex = SimulatedExecutor(spec, cfg.sim, seed=ex_seed, recentre=True)
     try:
         res = infer_object(
@@ -131,6 +131,7 @@ def collect_object(model, spec: ObjectSpec, index: int, cfg: CollectionConfig) -
             initial_pose=ex.initial_pose,
             truth=spec.params.as_array(),
             policy=policy,
+            sim_config=cfg.sim,  # the executor's
         )
     finally:
         ex.close()

@@ -21,5 +21,5 @@ def progress_bar(enabled: bool = True, remaining: bool = True) -> Progress:
         MofNCompleteColumn(),
         TimeRemainingColumn() if remaining else TimeElapsedColumn(),
         disable=not enabled,
-        console=Console(stderr=True),
+        console=Console(stderr=True, emoji=False),
     )

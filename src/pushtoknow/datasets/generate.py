@@ -9,6 +9,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import re
 from pathlib import Path
 from typing import Literal
 
@@ -31,15 +32,16 @@ from pushtoknow.datasets.shards import (
 from pushtoknow.geometry.affordances import sample_push_affordances
 from pushtoknow.testbed.config import SimConfig
 from pushtoknow.testbed.executor import SimulatedExecutor
+from pushtoknow.testbed.object_refs import load_object_spec
 from pushtoknow.testbed.objects import (
     ObjectSpec,
     build_catalogue,
     catalogue_split,
-    load_object_spec,
     novel_objects,
     sample_continuous_object,
 )
 from pushtoknow.testbed.push import Push
+from pushtoknow.testbed.random_shapes import random_objects
 
 
 class GenerationConfig(Config):
@@ -49,7 +51,7 @@ class GenerationConfig(Config):
     objects_from: str = Field(
         "catalogue",
         description="catalogue | catalogue-train | catalogue-test | continuous | "
-        "catalogue-train+continuous | novel | FILE",
+        "catalogue-train+continuous | novel | random[:SEED] | FILE",
     )
     profiles: tuple[Literal["constant", "release"], ...] = ("constant",)
     objects_per_shard: int = Field(4, gt=0)
@@ -81,12 +83,23 @@ def select_objects(objects_from: str, n: int, seed: int) -> list[ObjectSpec]:
         return [grid[i // 2] if i % 2 == 0 else cont[i // 2] for i in range(n)]
     if objects_from == "novel":  # the evaluation's kind of object: unseen shapes among them
         return novel_objects(n, seed)
+    if objects_from == "random":  # random shapes (testbed.random_shapes) of the dataset seed
+        if seed < 0:
+            raise ObjectSpecError("--seed", seed, "random objects need a non-negative seed")
+        return random_objects(n, seed)
+    if objects_from.startswith("random:"):  # random shapes of their own seed
+        key = objects_from.partition(":")[2]
+        if not re.fullmatch(r"[0-9]+", key):
+            raise ObjectSpecError(
+                "--objects-from", objects_from, "random:SEED needs a non-negative integer SEED"
+            )
+        return random_objects(n, int(key))
     path = Path(objects_from)
     if not path.exists():
         raise ObjectSpecError(
             "--objects-from",
             objects_from,
-            "neither 'catalogue', 'continuous', 'novel' nor an existing file",
+            "neither 'catalogue', 'continuous', 'novel', 'random[:SEED]' nor an existing file",
         )
     data = yaml.safe_load(path.read_text())
     items = data.get("objects", data) if isinstance(data, dict) else data

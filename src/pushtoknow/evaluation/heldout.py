@@ -21,7 +21,9 @@ from pushtoknow.evaluation.metrics import coverage, nrmse, product_nrmse
 class HeldoutRun:
     """Per object (N) and push (K + 1, index 0 = the prior): mean (N, K+1, 5) SI,
     std (N, K+1, 5) SI, zscore (N, K+1, 5) of the truth in the belief's normalised space
-    (`PushEstimate.zscore`), product (N, K+1) E[μ·m], truth (N, 5), ids (N,)."""
+    (`PushEstimate.zscore`), product (N, K+1) E[μ·m], truth (N, 5), ids (N,); lower, upper
+    (N, K+1, 5) SI: each estimate's 90% interval (`PushEstimate.interval`), None in a run
+    made before they were recorded."""
 
     mean: np.ndarray
     std: np.ndarray
@@ -35,14 +37,16 @@ class HeldoutRun:
     profiles: list[list[str]] | None = None  # (N, K) speed profile of each executed push
     push_actions: np.ndarray | None = None  # (N, K, 5) Push.as_array of each executed push
     push_tracks: np.ndarray | None = None  # (N, K, T, 9) time, pose (3), tactile (3), pusher (2)
+    lower: np.ndarray | None = None
+    upper: np.ndarray | None = None
 
 
 def _run_one(args) -> dict:
     import time
 
-    from pushtoknow.inference.session import InferenceConfig, infer_simulated
+    from pushtoknow.inference import InferenceConfig, infer_simulated
     from pushtoknow.models.checkpoint import load_checkpoint
-    from pushtoknow.testbed.objects import load_object_spec
+    from pushtoknow.testbed.object_refs import load_object_spec
 
     model_path, object_ref, pushes, policy, seed, sigma_points, profiles = args
     t0 = time.perf_counter()
@@ -66,6 +70,8 @@ def _run_one(args) -> dict:
         "id": spec.name if object_ref.lstrip().startswith("{") else object_ref,
         "mean": np.stack([e.mean for e in rows]),
         "std": np.stack([e.std for e in rows]),
+        "lower": np.stack([e.interval()[0] for e in rows]),
+        "upper": np.stack([e.interval()[1] for e in rows]),
         "zscore": np.stack([e.zscore(spec.params.as_array()) for e in rows]),
         "product": np.array([product_moments(e.mean_norm, e.cov_norm)[0] for e in rows]),
         "truth": spec.params.as_array(),
@@ -148,6 +154,8 @@ def evaluate_heldout(
         profiles=[r["profiles"] for r in out],
         push_actions=np.stack([r["push_actions"] for r in out]),
         push_tracks=np.stack([r["push_tracks"] for r in out]),
+        lower=np.stack([r["lower"] for r in out]),
+        upper=np.stack([r["upper"] for r in out]),
     )
 
 

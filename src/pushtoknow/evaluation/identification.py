@@ -23,9 +23,9 @@ import numpy as np
 
 from pushtoknow.common.parallel import Workers
 from pushtoknow.common.params import PARAM_NAMES
-from pushtoknow.evaluation.metrics import coverage, nrmse, product_nrmse
+from pushtoknow.evaluation.metrics import MethodRun, coverage, nrmse, product_nrmse
 from pushtoknow.identification.config import IdentifyConfig
-from pushtoknow.identification.fit import identify
+from pushtoknow.identification.fit import LEVEL, identify
 from pushtoknow.identification.replay import ReplayScene, RolloutPool
 from pushtoknow.identification.synthetic import add_tracking_noise, simulate_pushes
 from pushtoknow.testbed.config import SimConfig
@@ -125,20 +125,21 @@ def oracle_run(
 ):
     """The `oracle` method of the evaluation suite: `identify` on the pushes the first model
     made (`base`: its HeldoutRun, with push tracks), the true footprint and the simulator's own
-    physics. Returns a `suite.MethodRun` of two rows per object: the prior and the estimate
-    after all K pushes (fitting after every push would cost K times as much)."""
-    from pushtoknow.common.params import normalise_params, product_moments, si_moments
+    physics. Returns a `metrics.MethodRun` of two rows per object: the prior and the estimate
+    after all K pushes (fitting after every push would cost K times as much), each with its 90%
+    interval (the prior's from the same log-normal / Gaussian marginals as its mean)."""
+    from pushtoknow.common.estimate import estimate_from_belief
+    from pushtoknow.common.params import normalise_params, product_moments
     from pushtoknow.evaluation.heldout import records_from_tracks
-    from pushtoknow.evaluation.suite import MethodRun
     from pushtoknow.identification.prior import prior_moments
-    from pushtoknow.testbed.objects import load_object_spec
+    from pushtoknow.testbed.object_refs import load_object_spec
 
     cfg = ORACLE_SETTINGS
     sim = sim_config.model_copy(update={"render": False})
     z0, p0 = prior_moments()
-    m0, s0 = si_moments(z0, p0)
+    prior = estimate_from_belief(z0, p0, None, LEVEL)
     prod0 = product_moments(z0, p0)[0]
-    means, stds, zs, prods, secs = [], [], [], [], []
+    means, stds, lowers, uppers, zs, prods, secs = [], [], [], [], [], [], []
     with RolloutPool(workers) as pool:
         for i, ref in enumerate(objects):
             spec = load_object_spec(ref)
@@ -154,8 +155,10 @@ def oracle_run(
             res = identify(records, scene, cfg, seed=seed, pool=pool)
             truth = base.truth[i]
             z_prior = (normalise_params(truth) - z0) / np.sqrt(np.diagonal(p0))
-            means.append([m0, res.mean])
-            stds.append([s0, res.std])
+            means.append([prior.mean, res.mean])
+            stds.append([prior.std, res.std])
+            lowers.append([prior.lower, res.lower])
+            uppers.append([prior.upper, res.upper])
             zs.append([z_prior, res.zscore(truth)])
             prods.append([prod0, res.mu_m])
             secs.append(res.seconds)
@@ -169,4 +172,6 @@ def oracle_run(
         np.array(prods),
         float(np.median(secs)),
         np.array(zs),
+        lower=np.array(lowers),
+        upper=np.array(uppers),
     )

@@ -1,4 +1,6 @@
-"""NRMSE, interval coverage and the prior-mean predictor (docs/DESIGN.md §9).
+"""NRMSE, interval coverage, counts of impossible estimates and of estimates outside their own
+interval, the prior-mean predictor and `MethodRun`, the estimates of one method that they are
+computed on (docs/DESIGN.md §9).
 
 NRMSE = RMSE / (max − min of the parameter over the setup's catalogue); overall = the mean of the
 five per-parameter values. Coverage = share of objects whose truth lies in the central Gaussian
@@ -6,6 +8,8 @@ interval mean ± z·std.
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 from scipy.stats import norm
@@ -52,6 +56,33 @@ def gaussian_zscores(mean: np.ndarray, std: np.ndarray, truth: np.ndarray) -> np
     return (np.asarray(truth) - np.asarray(mean)) / np.maximum(np.asarray(std), 1e-300)
 
 
+@dataclass
+class MethodRun:
+    """Estimates of one method on one set: mean, std (N, K+1, 5) SI after k = 0..K pushes,
+    product (N, K+1) E[μ·m] or None (then m̄·μ̄), truth (N, 5), ids (N,); zscore
+    (N, K+1, 5) of the truth where the belief is not Gaussian in SI (the filter's), else None
+    (then (truth − mean) / std); lower, upper (N, K+1, 5) SI: the 90% interval each estimate
+    reports (from the same distribution as its mean, docs/DESIGN.md §2), or None where the run
+    has none (then `estimates_outside_interval` is not computed)."""
+
+    mean: np.ndarray
+    std: np.ndarray
+    truth: np.ndarray
+    ids: list[str]
+    product: np.ndarray | None = None
+    seconds_per_object: float | None = None
+    zscore: np.ndarray | None = None
+    profiles: list[list[str]] | None = None  # (N, K) speed profile of each push it chose
+    lower: np.ndarray | None = None
+    upper: np.ndarray | None = None
+
+    def zscores(self, k: int) -> np.ndarray:
+        """(N, 5) z-scores of the truth after push k."""
+        if self.zscore is not None:
+            return self.zscore[:, k]
+        return gaussian_zscores(self.mean[:, k], self.std[:, k], self.truth)
+
+
 def coverage(zscores: np.ndarray, level: float = 0.9) -> dict:
     """Share of objects whose truth lies in the method's equal-tailed `level` interval, from
     z-scores (N, P) of the truth in the space where the method's belief is Gaussian (SI for
@@ -84,6 +115,29 @@ def impossible_estimates(mean: np.ndarray, footprints: list) -> int:
             )
             count += not possible
     return count
+
+
+OUTSIDE_INTERVAL_RTOL = 1e-9  # rounding of the interval's quantiles, relative to its bounds
+
+
+def estimates_outside_interval(mean: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> int:
+    """How many estimates (object, push) report a mean outside their own interval: some
+    parameter's mean < lower or > upper, beyond a relative tolerance of
+    `OUTSIDE_INTERVAL_RTOL` × the larger |bound| of that parameter's interval (so a mean at a
+    bound, or rounded past it, is inside). Each estimate counts once however many of its
+    parameters are outside; a non-finite mean or bound counts as outside (it lies in no
+    interval). mean, lower, upper: (..., 5) SI, e.g. (N, K+1, 5); every estimate following
+    docs/DESIGN.md §2 (one distribution per parameter, log-concave) gives 0."""
+    mean, lower, upper = (np.asarray(a, dtype=float) for a in (mean, lower, upper))
+    if not mean.shape == lower.shape == upper.shape or mean.shape[-1:] != (len(PARAM_NAMES),):
+        raise ValueError(
+            f"expected mean, lower and upper of one shape (..., {len(PARAM_NAMES)}), got "
+            f"{mean.shape}, {lower.shape}, {upper.shape}"
+        )
+    with np.errstate(invalid="ignore"):
+        tol = OUTSIDE_INTERVAL_RTOL * np.maximum(np.abs(lower), np.abs(upper))
+        inside = (mean >= lower - tol) & (mean <= upper + tol)
+    return int(np.count_nonzero(~inside.all(axis=-1)))
 
 
 class PriorMeanPredictor:

@@ -316,18 +316,18 @@ def _training_features(root: Path):
 def real_inference_config(pushes: int, num_sigma_points: int | None = None):
     """`InferenceConfig` of the filter on recorded pushes (each starts at its motion-capture
     pose)."""
-    from pushtoknow.inference.session import InferenceConfig
+    from pushtoknow.inference.estimator import InferenceConfig
 
     return InferenceConfig(pushes=pushes, num_sigma_points=num_sigma_points)
 
 
 def _run_filter(model, records, camera, seed: int, num_sigma_points: int | None):
     """Filter over the recorded pushes in order; returns (prior, estimates, pose errors)."""
-    from pushtoknow.inference.session import ObjectEstimator
+    from pushtoknow.inference.learned_filter import LearnedFilterEstimator
     from pushtoknow.testbed.executor import RecordedExecutor
 
     cfg = real_inference_config(len(records), num_sigma_points)
-    est = ObjectEstimator(model, cfg, seed)
+    est = LearnedFilterEstimator(model, cfg, seed)
     ex = RecordedExecutor(records, camera)
     prior = est.estimate(0)
     estimates, pose_err = [], []
@@ -335,7 +335,7 @@ def _run_filter(model, records, camera, seed: int, num_sigma_points: int | None)
         view = ex.observe()
         rec = ex.execute(recorded.push)  # the recording's own push; nothing to choose
         pose0 = np.asarray(rec.pose[0], dtype=float)  # motion capture (module doc)
-        poses = est.filter_push(rec, view, pose0)
+        poses = est.update(rec, view, pose0)
         estimates.append(est.estimate(k + 1, rec.push))
         d = poses[-1] - rec.pose[-1]
         pose_err.append(

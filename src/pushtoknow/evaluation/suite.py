@@ -22,9 +22,15 @@ Protocol (what each number means):
   runs; the forest and the prior are refitted on the same training data as the models.
 - **Coverage**: share of (object, parameter) pairs whose truth lies in the 68% / 90% central
   Gaussian interval of the method's final estimate (the forest's std is its tree spread).
+- **Impossible / outside interval**: of the N·(K+1) estimates, how many describe no object
+  (`impossible_estimates`), and how many report a mean outside their own 90% interval
+  (`estimates_outside_interval`; target 0, docs/DESIGN.md §2). The filters' and the oracle's
+  intervals are their reported, asymmetric ones; the forest's and the prior's are mean ±
+  1.645·std, the Gaussian-in-SI interval their coverage uses, symmetric, so their count is 0
+  by construction (computed all the same, so every row is counted the same way).
 
-Inference runs are cached under OUT/cache (one .npz per set and method, keyed by the objects
-and settings), so an interrupted evaluation resumes where it stopped.
+Inference runs are cached under OUT/cache (one .npz per set and method, keyed by the objects,
+settings and `CACHE_FORMAT`), so an interrupted evaluation resumes where it stopped.
 """
 
 from __future__ import annotations
@@ -33,11 +39,11 @@ import hashlib
 import json
 import os
 import platform
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 from pydantic import Field
+from scipy.stats import norm
 
 from pushtoknow.baselines.random_forest import ForestBaseline, ForestConfig, features_from_dataset
 from pushtoknow.common.config import Config
@@ -46,19 +52,24 @@ from pushtoknow.common.params import PARAM_NAMES
 from pushtoknow.common.policies import POLICY_NAMES
 from pushtoknow.evaluation.heldout import HeldoutRun, evaluate_heldout
 from pushtoknow.evaluation.metrics import (
+    MethodRun,
     PriorMeanPredictor,
     coverage,
-    gaussian_zscores,
+    estimates_outside_interval,
     impossible_estimates,
     nrmse,
     product_nrmse,
 )
-from pushtoknow.testbed.objects import load_object_spec
+from pushtoknow.testbed.object_refs import load_object_spec
 
 PRIOR = "prior-mean"
 FOREST = "forest"
 FOREST_VISNET = "forest-visnet"
 ORACLE_KEY = "oracle"  # evaluation.identification.ORACLE
+INTERVAL_LEVEL = 0.9  # the interval every estimate reports (docs/DESIGN.md §2)
+# What an inference-run cache holds, part of its key: 2 added each estimate's interval (lower,
+# upper), so a run cached before is recomputed rather than read without them.
+CACHE_FORMAT = 2
 
 
 class EvaluationConfig(Config):
@@ -96,29 +107,6 @@ def product_relative_error(run: MethodRun, threshold: float = 0.02) -> dict:
     }
 
 
-@dataclass
-class MethodRun:
-    """Estimates of one method on one set: mean, std (N, K+1, 5) SI after k = 0..K pushes,
-    product (N, K+1) E[μ·m] or None (then m̄·μ̄), truth (N, 5), ids (N,); zscore
-    (N, K+1, 5) of the truth where the belief is not Gaussian in SI (the filter's), else None
-    (then (truth − mean) / std)."""
-
-    mean: np.ndarray
-    std: np.ndarray
-    truth: np.ndarray
-    ids: list[str]
-    product: np.ndarray | None = None
-    seconds_per_object: float | None = None
-    zscore: np.ndarray | None = None
-    profiles: list[list[str]] | None = None  # (N, K) speed profile of each push it chose
-
-    def zscores(self, k: int) -> np.ndarray:
-        """(N, 5) z-scores of the truth after push k."""
-        if self.zscore is not None:
-            return self.zscore[:, k]
-        return gaussian_zscores(self.mean[:, k], self.std[:, k], self.truth)
-
-
 def fold_indices(n: int, folds: int, seed: int) -> list[np.ndarray]:
     """`folds` disjoint index groups covering range(n), seeded."""
     if n < folds:
@@ -131,8 +119,9 @@ def summarise_method(
     run: MethodRun, folds: list[np.ndarray], footprints: list | None = None
 ) -> dict:
     """NRMSE of the final estimate (mean ± std over folds, and over all objects), μ·m NRMSE,
-    68%/90% coverage, NRMSE and 90% coverage after every push k = 0..K (all objects), and,
-    given the objects' true footprints, how many of the N·(K+1) estimates were physically
+    68%/90% coverage, NRMSE and 90% coverage after every push k = 0..K (all objects), how many
+    of the N·(K+1) estimates report a mean outside their own interval (None where the run has
+    no intervals), and, given the objects' true footprints, how many were physically
     impossible."""
     k_last = run.mean.shape[1] - 1
     m, t = run.mean[:, k_last], run.truth
@@ -166,6 +155,9 @@ def summarise_method(
         "impossible_estimates": None
         if footprints is None
         else impossible_estimates(run.mean, footprints),
+        "outside_interval": None
+        if run.lower is None or run.upper is None
+        else estimates_outside_interval(run.mean, run.lower, run.upper),
         "profile_share": None if run.profiles is None else profile_share(run.profiles),
     }
 
@@ -210,6 +202,7 @@ def _cache_key(
     # the previous model's runs
     h.update(ckpt.read_bytes() if ckpt.is_file() else str(model).encode())
     settings = [policy, cfg.pushes, cfg.seed, cfg.sigma_points, objects, list(profiles)]
+    settings.append({"format": CACHE_FORMAT})
     h.update(json.dumps(settings).encode())
     return h.hexdigest()[:16]
 
@@ -241,6 +234,7 @@ def _save_run(path: Path, key: str, run: HeldoutRun) -> None:
             if run.push_tracks is None
             else {"push_actions": run.push_actions, "push_tracks": run.push_tracks}
         ),
+        **({} if run.lower is None else {"lower": run.lower, "upper": run.upper}),
     )
 
 
@@ -269,6 +263,8 @@ def _load_run(path: Path, key: str) -> HeldoutRun | None:
         profiles=f["profiles"].tolist(),
         push_actions=f.get("push_actions"),
         push_tracks=f.get("push_tracks"),
+        lower=f.get("lower"),  # absent from a cache without intervals: None, never guessed
+        upper=f.get("upper"),
     )
 
 
@@ -342,6 +338,8 @@ def _oracle_run(
             f["product"],
             float(f["seconds"]),
             f["zscore"],
+            lower=f.get("lower"),
+            upper=f.get("upper"),
         )
     run = oracle_run(base, objects, sim_config, seed, workers, progress)
     _save_npz(
@@ -354,8 +352,17 @@ def _oracle_run(
         product=run.product,
         seconds=np.array(run.seconds_per_object),
         zscore=run.zscore,
+        **({} if run.lower is None else {"lower": run.lower, "upper": run.upper}),
     )
     return run
+
+
+def gaussian_run(mean: np.ndarray, std: np.ndarray, truth: np.ndarray, ids: list[str]) -> MethodRun:
+    """The run of a method whose estimates are Gaussian in SI (the forest, the prior mean):
+    its intervals are mean ± z·std at `INTERVAL_LEVEL`, symmetric, so no mean lies outside its
+    own (the count is computed all the same, as for every method)."""
+    z = float(norm.ppf(0.5 + INTERVAL_LEVEL / 2))
+    return MethodRun(mean, std, truth, ids, lower=mean - z * std, upper=mean + z * std)
 
 
 def _forest_run(forest: ForestBaseline, features: np.ndarray, base: HeldoutRun, prior) -> MethodRun:
@@ -366,7 +373,7 @@ def _forest_run(forest: ForestBaseline, features: np.ndarray, base: HeldoutRun, 
         m, s = forest.predict_object(f)
         means.append(np.concatenate([p_mean, m]))
         stds.append(np.concatenate([p_std, s]))
-    return MethodRun(np.stack(means), np.stack(stds), base.truth, base.ids)
+    return gaussian_run(np.stack(means), np.stack(stds), base.truth, base.ids)
 
 
 def _variant_names(loaded: list) -> list[str]:
@@ -466,13 +473,15 @@ def run_evaluation(
                     float(np.median(run.seconds)),
                     run.zscore,
                     run.profiles,
+                    run.lower,
+                    run.upper,
                 )
                 if is_base:
                     base = run
         n = len(objects)
         p_mean, p_std = prior.predict(n)
         k1 = cfg.pushes + 1
-        methods[PRIOR] = MethodRun(
+        methods[PRIOR] = gaussian_run(
             np.repeat(p_mean[:, None], k1, 1),
             np.repeat(p_std[:, None], k1, 1),
             base.truth,

@@ -2,7 +2,7 @@
 
 Shapes: B objects, C sigma points, D = pose_dim + param_dim state, P = pose_dim, M observation.
 `context` is an opaque per-batch object the filter passes through unchanged (for the learned
-models, `pushtoknow.models.learned.PushContext`). Models only ever receive states that satisfy
+models, `pushtoknow.models.context.PushContext`). Models only ever receive states that satisfy
 the filter's constraints (invalid sigma points are projected first, see `filters.constraints`).
 """
 

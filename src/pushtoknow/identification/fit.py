@@ -24,7 +24,9 @@ coordinates; a direction carrying less than `flat_information` of the prior's in
 reported as not identified and its data information dropped, so it keeps exactly the prior's
 width, never a narrow width from a flat or noisy curvature. Posterior cov = (H_data + P⁻¹)⁻¹
 plus δδᵀ, δ the last Gauss–Newton step (a polish with a central-difference Jacobian): how far
-the optimum may still be from where the search stopped.
+the optimum may still be from where the search stopped. Reported (`common.estimate`): m, μ, I_z
+log-normal, the CoM the Gaussian truncated to where a CoM can lie (the footprint's convex hull
+less the testbed's `COM_MARGIN`), each parameter's mean, std and interval from one distribution.
 """
 
 from __future__ import annotations
@@ -37,13 +39,13 @@ import numpy as np
 from scipy.stats import norm
 
 from pushtoknow.common.errors import IdentificationError
+from pushtoknow.common.estimate import ParameterEstimate, com_region, estimate_from_belief
 from pushtoknow.common.params import (
     GRAVITY,
     PARAM_NAMES,
     denormalise_params,
     normalise_params,
     product_moments,
-    si_moments,
     space_scale,
 )
 from pushtoknow.identification.config import IdentifyConfig
@@ -54,18 +56,20 @@ from pushtoknow.identification.replay import (
     RolloutPool,
     feasible,
 )
+from pushtoknow.identification.residuals import ReplayResiduals, huber_cost, huber_weights
 from pushtoknow.testbed.config import SimConfig, check_testbed_version
+from pushtoknow.testbed.objects import COM_MARGIN
 from pushtoknow.testbed.push import pad_positions
 from pushtoknow.testbed.sim import PushRecord
 
 TRACK_TOLERANCE = 1e-3  # m: a recorded pad track may depart this far from its commanded profile
-PENALTY_SCALE = 1e-3  # m of CoM projection (or 0.1 % of I_z excess) per unit penalty residual
 LEVEL = 0.9
 QUASI_STATIC_SPEED = 0.2  # m/s: constant pushes up to this speed are quasi-static
 QUASI_STATIC_BLIND = [1, 4]  # fit coordinates they do not reveal: log m at fixed μ·m, log I_z
 UNKNOWN_FORCE_NOISE = 0.1  # N: first guess for a recording without a noise level (real data)
 NOISE_FLOOR_SHARE = 1e-2  # an estimated noise level stays above this share of its first guess
 MU_M_START_SPAN = 1.5  # screened starts keep μ·m within [1, this] × the closed form's
+COM_NOTE_MASS = 0.9  # a note says so when the CoM region holds less of the Gaussian than this
 STEADY_AFTER = 1.0  # s: a constant push's force is steady from here (or its contact's middle)
 
 
@@ -73,10 +77,15 @@ STEADY_AFTER = 1.0  # s: a constant push's force is steady from here (or its con
 class Identification:
     """Result of `identify`, SI unless stated.
 
-    mean, std (5,): posterior moments in PARAM_NAMES order (log-normal for m, μ, I_z);
-    estimate (5,): the MAP point; lower, upper (5,): equal-tailed `level` interval (asymmetric
-    for m, μ, I_z); mean_norm (5,), cov_norm (5, 5): the Gaussian posterior over the normalised
-    parameters (`common.params.normalise_params`); mu_m, mu_m_std, mu_m_interval: μ·m (kg);
+    mean, std (5,): posterior moments in PARAM_NAMES order (log-normal for m, μ, I_z; the CoM's
+    of the Gaussian truncated to where a CoM can lie, the footprint's convex hull less the
+    testbed's `COM_MARGIN`, `common.estimate`); estimate (5,): the MAP point (its CoM projected
+    into the hull less `COM_MARGIN` + `COM_INSET`, `replay.feasible`); lower, upper (5,):
+    equal-tailed `level` interval of the same distributions (asymmetric for m, μ, I_z), so
+    lower ≤ mean ≤ upper; mean_norm (5,), cov_norm (5, 5): the Gaussian posterior over the
+    normalised parameters (`common.params.normalise_params`); belief: the reported estimate of
+    that posterior (`common.estimate.ParameterEstimate`, the source of mean, std, lower,
+    upper and the z-scores); mu_m, mu_m_std, mu_m_interval: μ·m (kg);
     unidentified: the directions the pushes did not reveal (kept at the prior's width), each
     as a combination of normalised parameters; information (5,): data information of the
     prior-whitened eigendirections (1 = as much as the prior), descending; chi2: reduced χ² of
@@ -112,9 +121,14 @@ class Identification:
     noise_estimated: bool = False  # the noise came from the misfit (a recording without one)
     poor_fit: bool = False  # χ² stayed above `restart_chi2`: the poor-fit rule widened it
     coarse_stage: bool = False  # the coarse-to-fine descent found the reported optimum
+    belief: ParameterEstimate | None = field(default=None, repr=False)
 
     def zscore(self, truth) -> np.ndarray:
-        """(5,) z-scores of a true φ (SI) in the normalised space where the belief is Gaussian."""
+        """(5,) z-scores of a true φ (SI) under the reported distributions: the truth lies in
+        the `level` interval iff |z| ≤ Φ⁻¹(½ + level/2). In the normalised space where the belief
+        is Gaussian, except for the truncated CoM (`ParameterEstimate.zscore`)."""
+        if self.belief is not None:
+            return self.belief.zscore(truth)
         z = normalise_params(np.asarray(truth, dtype=np.float64))
         return (z - self.mean_norm) / np.sqrt(np.diagonal(self.cov_norm))
 
@@ -236,16 +250,6 @@ def closed_form_start(records: Sequence[PushRecord], sim_config: SimConfig) -> d
     return {"mu_m": mu_m, "mass": mass, "friction": friction}
 
 
-def _huber_weights(r: np.ndarray, k: float, robust: np.ndarray) -> np.ndarray:
-    a = np.abs(r)
-    return np.where(robust & (a > k), k / np.maximum(a, 1e-300), 1.0)
-
-
-def _huber(r: np.ndarray, k: float, robust: np.ndarray) -> float:
-    a = np.abs(r)
-    return float(np.sum(np.where(robust & (a > k), k * a - 0.5 * k * k, 0.5 * a * a)))
-
-
 def _describe(direction_z: np.ndarray) -> str:
     """A unit direction over the normalised parameters as text, e.g. "+1.00 inertia"."""
     d = direction_z / np.linalg.norm(direction_z)
@@ -299,7 +303,8 @@ def laplace_posterior(
     with the prior, and the last step's outer product is added. Returns (cov, eigenvalues (5,)
     ascending, eigenvectors (5, 5) in whitened coordinates, flat (5,) bool)."""
     chol = np.linalg.cholesky(prior_cov)
-    root = np.sqrt(np.broadcast_to(np.asarray(information_scale, dtype=np.float64), (5,)))
+    dim = len(h_data)
+    root = np.sqrt(np.broadcast_to(np.asarray(information_scale, dtype=np.float64), (dim,)))
     white = chol.T @ (root[:, None] * h_data * root[None, :]) @ chol
     lam, vecs = np.linalg.eigh(0.5 * (white + white.T))
     lam = np.clip(lam, 0.0, None)
@@ -308,36 +313,6 @@ def laplace_posterior(
     cov = chol @ vecs @ np.diag(1.0 / (1.0 + kept)) @ vecs.T @ chol.T
     cov += np.outer(last_step, last_step)
     return 0.5 * (cov + cov.T), lam, vecs, flat
-
-
-class _Problem:
-    """Residuals of candidate fit coordinates u (B, 5), batched."""
-
-    def __init__(self, scene, tracks, pool, sigmas, footprint):
-        self.scene, self.tracks, self.pool = scene, tracks, pool
-        self.sigmas = sigmas  # (5,) force, force, x, y, θ
-        self.footprint = footprint
-        self.t_inv = np.linalg.inv(fit_transform())
-        # every sample after the first (which is the start state), pushes concatenated
-        self.obs = np.concatenate([np.column_stack([t.force, t.pose])[1:] for t in tracks])
-        self.push_lengths = [len(t.pose) - 1 for t in tracks]
-        self.n_data = self.obs.size
-        robust = np.zeros(self.obs.shape, dtype=bool)
-        robust[:, :2] = True  # the Huber loss applies to the force samples
-        self.robust = robust.reshape(-1)
-
-    def phi(self, u: np.ndarray) -> np.ndarray:
-        return denormalise_params(np.atleast_2d(u) @ self.t_inv.T)
-
-    def residuals(self, us: np.ndarray) -> np.ndarray:
-        """(B, n_data + 2) residuals in noise units, the last two the feasibility penalties."""
-        phis = self.phi(us)
-        feas = [feasible(p, self.footprint) for p in phis]
-        sims = self.pool.run(self.scene, np.stack([f[0] for f in feas]), self.tracks)
-        sim = np.stack([np.concatenate([s[1:] for s in pushes]) for pushes in sims])
-        data = (sim - self.obs[None]) / self.sigmas
-        pen = np.array([[m / PENALTY_SCALE, e / PENALTY_SCALE] for _, m, e in feas])
-        return np.concatenate([data.reshape(len(us), -1), pen], axis=1)
 
 
 def identify(
@@ -382,7 +357,7 @@ def identify(
             progress(n)
 
     try:
-        prob = _Problem(scene, tracks, pool, sigmas, footprint)
+        prob = ReplayResiduals(scene, tracks, pool, sigmas)
 
         def costs(res: np.ndarray, us: np.ndarray) -> np.ndarray:
             n = prob.n_data
@@ -390,7 +365,7 @@ def identify(
             for r, u in zip(res, us):
                 d = u - u_prior
                 out.append(
-                    _huber(r[:n], cfg.huber, prob.robust)
+                    huber_cost(r[:n], cfg.huber, prob.robust)
                     + 0.5 * float(r[n:] @ r[n:])
                     + 0.5 * d @ p_u_inv @ d
                 )
@@ -441,7 +416,7 @@ def identify(
                 report(5)
                 jac = ((rj - r[None]) / fd[:, None]).T  # (n + 2, 5)
                 w = np.concatenate(
-                    [_huber_weights(r[:n], cfg.huber, prob.robust), np.ones(len(r) - n)]
+                    [huber_weights(r[:n], cfg.huber, prob.robust), np.ones(len(r) - n)]
                 )
                 h = jac.T @ (w[:, None] * jac) + p_u_inv
                 g = jac.T @ (w * r) + p_u_inv @ (u - u_prior)
@@ -517,7 +492,7 @@ def identify(
         rj = prob.residuals(probe)
         report(10)
         jac = ((rj[:5] - rj[5:]) / (2 * fd[:, None])).T  # central differences
-        w = np.concatenate([_huber_weights(r[:n], cfg.huber, prob.robust), np.ones(len(r) - n)])
+        w = np.concatenate([huber_weights(r[:n], cfg.huber, prob.robust), np.ones(len(r) - n)])
         # one Gauss–Newton polish with the central Jacobian; the optimum is known only to
         # within this last step, so its outer product joins the covariance below
         h_full = jac.T @ (w[:, None] * jac) + p_u_inv
@@ -597,11 +572,12 @@ def identify(
     estimate[2:4] += (dx, dy)
     z_map = z_map.copy()
     z_map[2:4] += np.array([dx, dy]) / space_scale()[2:4]  # the CoM is normalised linearly
-    mean, std = si_moments(z_map, cov_z)
-    sd = np.sqrt(np.diagonal(cov_z))
+    # mean, std and interval of one distribution per parameter: the CoM's truncated to where a
+    # CoM can lie (the footprint's convex hull less the testbed's margin, record frame)
+    region = com_region(footprint.vertices, COM_MARGIN) + np.array([dx, dy])
+    belief = estimate_from_belief(z_map, cov_z, region, LEVEL)
+    mean, std, lower, upper = belief.mean, belief.std, belief.lower, belief.upper
     q = norm.ppf(0.5 + LEVEL / 2)
-    lower = denormalise_params(z_map - q * sd)
-    upper = denormalise_params(z_map + q * sd)
     pm, ps = product_moments(z_map, cov_z)
     s = space_scale()
     wv = np.zeros(5)
@@ -631,6 +607,19 @@ def identify(
             f"{prob.sigmas[0]:.3g} N, position {prob.sigmas[2] * 1e3:.3g} mm, angle "
             f"{np.degrees(prob.sigmas[4]):.3g}°), so "
             "model error counts as noise and widens the intervals"
+        )
+    if belief.com is not None and belief.com.mass < COM_NOTE_MASS:
+        notes.append(
+            f"the Gaussian posterior puts only {belief.com.mass:.1%} of the CoM's probability "
+            "where a CoM can lie (the footprint's convex hull less "
+            f"{COM_MARGIN * 1e3:g} mm): the CoM's mean, std and interval are those of the "
+            "posterior restricted to it"
+            + (
+                " (too little to restrict to: the mean is the nearest such point, the "
+                "Gaussian's width about it)"
+                if belief.com.projected
+                else ""
+            )
         )
     if spread is not None:
         widened = np.sqrt(np.diagonal(cov_z) / np.maximum(np.diagonal(cov_z - spread), 1e-300))
@@ -679,4 +668,5 @@ def identify(
         noise_estimated=noise_unknown,
         poor_fit=poor,
         coarse_stage=coarse,
+        belief=belief,
     )

@@ -21,6 +21,7 @@ from pushtoknow.common.params import (
     LOG_PARAMS,
     PARAM_NAMES,
     PARAM_RANGES,
+    denormalise_params,
     normalise_param,
     space_scale,
 )
@@ -73,3 +74,55 @@ def fit_transform() -> np.ndarray:
 
 
 FIT_NAMES: tuple[str, ...] = ("log(mu*m)", "log m at fixed mu*m", "com_x", "com_y", "log I_z")
+
+
+GYRATION_SPREAD = 0.3  # std of log(k / k_uniform): 90% of objects within ×0.6–1.6 of a plate
+
+
+def polygon_moments(vertices: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Centroid (2,) and covariance (2, 2) of the uniform distribution over a simple polygon
+    (V, 2) (m, m²), by the shoelace formulas."""
+    p = np.asarray(vertices, dtype=np.float64)
+    q = np.roll(p, -1, axis=0)
+    cross = p[:, 0] * q[:, 1] - q[:, 0] * p[:, 1]
+    area = 0.5 * cross.sum()
+    c = ((p + q) * cross[:, None]).sum(axis=0) / (6.0 * area)
+    sxx = (cross * (p[:, 0] ** 2 + p[:, 0] * q[:, 0] + q[:, 0] ** 2)).sum() / (12.0 * area)
+    syy = (cross * (p[:, 1] ** 2 + p[:, 1] * q[:, 1] + q[:, 1] ** 2)).sum() / (12.0 * area)
+    sxy = (
+        cross
+        * (p[:, 0] * q[:, 1] + 2 * p[:, 0] * p[:, 1] + 2 * q[:, 0] * q[:, 1] + q[:, 0] * p[:, 1])
+    ).sum() / (24.0 * area)
+    cov = np.array([[sxx - c[0] ** 2, sxy - c[0] * c[1]], [sxy - c[0] * c[1], syy - c[1] ** 2]])
+    return c, cov
+
+
+def footprint_prior(
+    com_region: np.ndarray, gyration_radius: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Mean (5,) and covariance (5, 5) over the normalised parameters of an object whose
+    footprint is seen: m and μ as `prior_moments`; the CoM uniform over `com_region` (V, 2),
+    the footprint's convex hull less the testbed's margin (where any mass distribution puts
+    it); log I_z = log m + 2 log k, k the footprint's uniform-plate radius of gyration
+    `gyration_radius` (m) times a log-normal factor of std `GYRATION_SPREAD`. Normalised values
+    of a CoM or I_z beyond the catalogue ranges lie beyond ±1."""
+    mean, cov = prior_moments()
+    scale = space_scale()
+    i_m, i_cx, i_iz = (
+        PARAM_NAMES.index("mass"),
+        PARAM_NAMES.index("com_x"),
+        PARAM_NAMES.index("inertia"),
+    )
+    c, c_cov = polygon_moments(com_region)
+    s_c = scale[i_cx : i_cx + 2]
+    mean[i_cx : i_cx + 2] = [normalise_param("com_x", c[0]), normalise_param("com_y", c[1])]
+    cov[i_cx : i_cx + 2, i_cx : i_cx + 2] = c_cov / np.outer(s_c, s_c)
+    # in the filtering space (log): log I_z = log m + log k_u² + 2ε, ε ~ N(0, spread²)
+    log_m = float(np.log(denormalise_params(mean)[i_m]))
+    log_iz = log_m + 2.0 * np.log(gyration_radius)
+    var_log_m = cov[i_m, i_m] * scale[i_m] ** 2
+    var_log_iz = var_log_m + (2.0 * GYRATION_SPREAD) ** 2
+    mean[i_iz] = normalise_param("inertia", float(np.exp(log_iz)))
+    cov[i_iz, i_iz] = var_log_iz / scale[i_iz] ** 2
+    cov[i_iz, i_m] = cov[i_m, i_iz] = var_log_m / (scale[i_iz] * scale[i_m])
+    return mean, cov

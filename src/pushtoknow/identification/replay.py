@@ -165,9 +165,15 @@ class RolloutPool:
         """phis (B, 5) simulable SI → B lists of K arrays (T_k, 5): force and pose of each
         push (see `simulate_track`)."""
         phis = np.atleast_2d(np.asarray(phis, dtype=np.float64))
-        tasks = [(scene, phi, tr) for phi in phis for tr in tracks]
+        return self.run_each(scene, phis, [tracks] * len(phis))
+
+    def run_each(
+        self, scene: ReplayScene, phis: np.ndarray, tracks: list[list[PushTrack]]
+    ) -> list[list[np.ndarray]]:
+        """As `run`, each φ (B, 5) with its own pushes tracks[b] (K each)."""
+        tasks = [(scene, phi, tr) for phi, trs in zip(phis, tracks, strict=True) for tr in trs]
         out = self.runner.map(_task, tasks)
         self.rollouts += len(phis)
         self.push_rollouts += len(tasks)
-        k = len(tracks)
+        k = len(tracks[0]) if tracks else 0
         return [out[b * k : (b + 1) * k] for b in range(len(phis))]

@@ -8,9 +8,12 @@ Before push k (0-based) of K, the run samples candidate pushes among the afforda
   the centroid, in the object frame, is nearest to 2πk/K (a seeded offset), with profile
   profiles[k mod P];
 - ``random``: one random candidate (with one profile: the first, whose affordance is random);
-- ``active-kl`` / ``active-entropy``: the candidate with the highest N-step information score of
-  the estimator's own filter (`active.policies.ActivePolicy`), over the candidates' commanded pad
-  paths; it chooses contact, direction and profile.
+- ``active-kl`` / ``active-entropy``: the candidate with the highest N-step information score
+  under the estimator's own model (`PushDecision.information`, the estimator's scoring hook); it
+  chooses contact, direction and profile.
+
+A policy sees the decision only: the candidates, the view, the start pose, the run's generator
+and the scoring hook, never the estimator itself.
 """
 
 from __future__ import annotations
@@ -18,31 +21,30 @@ from __future__ import annotations
 import dataclasses
 import math
 from abc import ABC, abstractmethod
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, ClassVar
+from typing import ClassVar
 
 import numpy as np
-import torch
 
-from pushtoknow.active.policies import ACTIVE_POLICY_NAMES, ActivePolicy, ScoreName
+from pushtoknow.active.policies import ACTIVE_POLICY_NAMES, ScoreName
 from pushtoknow.common.camera import CameraModel
 from pushtoknow.common.policies import POLICY_NAMES
 from pushtoknow.geometry.affordances import mask_contour, sample_push_affordances
-from pushtoknow.models.learned import PushContext, with_pad_track
-from pushtoknow.testbed.config import SimConfig
 from pushtoknow.testbed.executor import View
-from pushtoknow.testbed.push import Push, pad_positions
+from pushtoknow.testbed.push import Push
 
-if TYPE_CHECKING:
-    from pushtoknow.inference.session import ObjectEstimator
+InformationHook = Callable[[ScoreName, float], np.ndarray]
+"""(score, horizon_fraction) ↦ (C,) expected information of each candidate under the current
+belief (`inference.estimator.Estimator.information`, bound to the decision's candidates)."""
 
 
 @dataclass(frozen=True)
 class PushDecision:
     """What a policy sees before push k (0-based) of `pushes`: the candidates (their contact
     points (C, 2), world m, in `contacts`), the object's view and start pose (x, y, θ), the
-    run's numpy generator, the profiles it may use at their speeds (m/s), and the estimator
-    (its filter and belief, for active policies)."""
+    run's numpy generator, the profiles it may use at their speeds (m/s), and `information`,
+    the estimator's scoring hook for active policies."""
 
     k: int
     pushes: int
@@ -54,7 +56,7 @@ class PushDecision:
     rng: np.random.Generator
     profiles: tuple[str, ...]
     speeds: dict[str, float]
-    estimator: ObjectEstimator
+    information: InformationHook
 
 
 class PushPolicy(ABC):
@@ -93,54 +95,35 @@ class RandomPolicy(PushPolicy):
 
 
 class InformationPolicy(PushPolicy):
-    """Active selection (docs/DESIGN.md §7): rollouts of the estimator's filter over the
-    candidates' commanded pad paths (`testbed.push.pad_positions`), all candidates in one
-    batch, scored by `score` ("kl" or "entropy") over N = horizon_fraction of a push's steps.
-    `sim_config`: the testbed settings the pushes are executed with (horizon, rate)."""
+    """Active selection (docs/DESIGN.md §7): the candidate with the highest expected
+    information `score` ("kl" or "entropy") over N = horizon_fraction of a push's steps, as
+    the estimator's own model predicts it (`PushDecision.information`); ties go to the first."""
 
     SCORES: ClassVar[dict[str, ScoreName]] = {n: s for s, n in ACTIVE_POLICY_NAMES.items()}
 
-    def __init__(self, name: str, sim_config: SimConfig, horizon_fraction: float = 0.5):
+    def __init__(self, name: str, horizon_fraction: float = 0.5):
         self.name = name  # one class, two named policies
         self.score = self.SCORES[name]
-        self.sim_config = sim_config
         self.horizon_fraction = horizon_fraction
+        self.last_scores: np.ndarray | None = None
 
     def choose(self, decision: PushDecision) -> Push:
-        d, est = decision, decision.estimator
-        push_config = self.sim_config.push
-        dt = 1.0 / self.sim_config.tactile.rate_hz
-        steps = int(round(push_config.horizon * self.sim_config.tactile.rate_hz))
-        selector = ActivePolicy(
-            est.filter, steps, self.score, self.horizon_fraction, est.num_sigma_points
-        )
-        mean, cov = est.start_belief(d.pose0)
-        times = np.arange(steps + 1) * dt
-        paths = torch.as_tensor(
-            np.stack([pad_positions(p, times, push_config) for p in d.candidates]),
-            dtype=torch.float32,
-        )  # (M, T, 2)
-        base = est.context(d.view, d.pose0, paths[:, 0], d.candidates)
-
-        def builder(_: Any, step: int) -> PushContext:
-            return with_pad_track(base, paths, step + 1, dt)
-
-        return d.candidates[int(selector.choose(d.candidates, mean, cov, builder, est.gen))]
+        if not decision.candidates:
+            raise ValueError("no candidate pushes to choose from")
+        scores = np.asarray(decision.information(self.score, self.horizon_fraction))
+        self.last_scores = scores
+        return decision.candidates[int(np.argmax(scores))]
 
 
-def make_policy(
-    name: str, sim_config: SimConfig | None = None, horizon_fraction: float = 0.5
-) -> PushPolicy:
-    """The policy called `name` (one of `POLICY_NAMES`); active ones need the testbed settings
-    the pushes run with."""
+def make_policy(name: str, horizon_fraction: float = 0.5) -> PushPolicy:
+    """The policy called `name` (one of `POLICY_NAMES`); active ones look ahead over
+    `horizon_fraction` of a push."""
     if name == UniformPolicy.name:
         return UniformPolicy()
     if name == RandomPolicy.name:
         return RandomPolicy()
     if name in InformationPolicy.SCORES:
-        if sim_config is None:
-            raise ValueError(f"policy {name!r} needs the testbed settings (sim_config)")
-        return InformationPolicy(name, sim_config, horizon_fraction)
+        return InformationPolicy(name, horizon_fraction)
     raise ValueError(f"policy must be one of {', '.join(POLICY_NAMES)}, got {name!r}")
 
 

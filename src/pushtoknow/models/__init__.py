@@ -1,5 +1,6 @@
 """Models used by the filters: the five networks (`networks`), their wiring into the filter
-interfaces with geometry (`learned`), and analytic models (`analytic`)."""
+interfaces with geometry (`learned`, `physics`; what they read about a push in `context`, how
+they see a sigma point in `encoding`), and analytic models (`analytic`)."""
 
 from pushtoknow.models.analytic import (
     ConstantObservationNoise,
@@ -7,18 +8,16 @@ from pushtoknow.models.analytic import (
     LinearObservation,
     PoseObservation,
 )
+from pushtoknow.models.context import PushContext
+from pushtoknow.models.encoding import EncodingConfig, ShapeActionEncoding, sigma_point_features
 from pushtoknow.models.learned import (
-    EncodingConfig,
     LearnedDynamics,
     LearnedModels,
     LearnedModelsConfig,
     LearnedObservation,
     LearnedObservationNoise,
-    PushContext,
-    ShapeActionEncoding,
     build_filter,
     build_learned_models,
-    sigma_point_features,
 )
 from pushtoknow.models.networks import (
     EncoderConfig,

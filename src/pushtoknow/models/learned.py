@@ -1,38 +1,23 @@
-"""Learned implementations of the filter interfaces: geometry (mask warp, action map) + networks.
+"""Learned implementations of the filter interfaces, and the builders of the models and filters.
 
-State s = (x, y, θ, φ̃) (B, C, 8): pose of the geometric frame (m, m, rad), normalised
-parameters. Per sigma point the models build
-
-* the encoder input [Ŝ, M]: S_0 warped to the sigma point's pose (`geometry.warp`) and the
-  action map of the push (`geometry.action_maps`), optionally cropped around the object;
-* features (x - x0, y - y0) / L, sin(θ - θ0), cos(θ - θ0), φ̃, the deviation
-  (δx / L, δy / L, δθ) of the point's pose from the pose the encoding was computed at, and the
-  pad in the point's object frame: its position / L, the push direction (sin, cos) and the
-  speed / `speed_scale` (12 + param_dim values, L = `length_scale`). The pad's pose is known
-  exactly from the robot's kinematics; giving it explicitly spares the networks from reading
-  millimetres off a 9 mm/pixel action map.
-
-Encoder modes (`EncodingConfig.mode`):
-* "per_sigma" (the paper): one encoding per sigma point; the deviation features are zero.
-* "mean": one encoding per object and call, at the mean pose of the points passed in; each
-  point's offset from that pose goes to ProcessNet/TacNet through the deviation features.
-  ~70× fewer conv evaluations per filter step (3 instead of ~207 at C = 100).
+The black-box models of the paper (`LearnedDynamics`, `LearnedObservation`: m, μ and I_z enter
+ProcessNet and TacNet as inputs like any feature) and the observation noise are here; the
+physics-structured models are in `models.physics`; `build_learned_models` and `build_filter`
+make either. What the models read about a push is a `models.context.PushContext`; how they see
+a sigma point (the shape-action encoding of the mask and action map, and the features) is
+`models.encoding`.
 """
 
 from __future__ import annotations
 
-import dataclasses
-from collections.abc import Callable
-from dataclasses import dataclass, field
-from typing import Literal, overload
+from dataclasses import dataclass
+from typing import Literal
 
 import torch
-import torch.nn.functional as F
 from pydantic import Field, model_validator
 from torch import nn
 
 from pushtoknow.common.angles import wrap_angle
-from pushtoknow.common.camera import CameraModel
 from pushtoknow.common.config import Config
 from pushtoknow.common.errors import ShapeError
 from pushtoknow.filters.base import FilterConfig
@@ -45,13 +30,21 @@ from pushtoknow.filters.interfaces import (
     PoseObservation,
 )
 from pushtoknow.filters.joint import JointFilter
-from pushtoknow.filters.shapes import expect_shape
-from pushtoknow.geometry.action_maps import ActionMapConfig, action_map
-from pushtoknow.geometry.warp import warp_affine_theta, warp_mask
+from pushtoknow.models import physics
+from pushtoknow.models.context import PushContext
+from pushtoknow.models.encoding import (
+    NUM_POSE_FEATURES,
+    POSE_DIM,
+    EncodingConfig,
+    ShapeActionEncoding,
+    sigma_point_features,
+)
 from pushtoknow.models.networks import (
     EncoderConfig,
     ObsNoiseNet,
     ObsNoiseNetConfig,
+    PhysicsProcessNet,
+    PhysicsTacNet,
     ProcessNet,
     ProcessNetConfig,
     ShapeActionEncoderNet,
@@ -59,303 +52,10 @@ from pushtoknow.models.networks import (
     TacNetConfig,
 )
 
-POSE_DIM = 3
-NUM_POSE_FEATURES = 12  # (x - x0)/L, (y - y0)/L, sin, cos, δx/L, δy/L, δθ, pad (5)
-SPEED_SCALE = 0.1  # m/s, normalises the push speed feature
 PAD_RADIUS = 0.005  # m: the testbed's pad (kept equal to `PadConfig.radius` by a test)
-STEADY_ACCEL = 0.05  # m/s²: pad accelerations below this are a steady push (tracking noise)
 
 
 FilterKind = Literal["dual", "joint", "vision_only"]
-
-
-@overload
-def _map_field(t: torch.Tensor, fn: Callable[[torch.Tensor], torch.Tensor]) -> torch.Tensor: ...
-@overload
-def _map_field(
-    t: torch.Tensor | None, fn: Callable[[torch.Tensor], torch.Tensor]
-) -> torch.Tensor | None: ...
-def _map_field(t, fn):
-    """fn applied to a context field, which may be None."""
-    return None if t is None else fn(t)
-
-
-@dataclass(frozen=True)
-class PushContext:
-    """Per-batch inputs of the learned models for one push (opaque to the filter).
-
-    mask0 (B, 1, H, W): S_0 in [0, 1] from the first frame; pose0 (B, 3): pose at the first
-    frame (m, m, rad); contact_xy (B, 2): where the action map is centred (m, world; the push's
-    contact point, or the pusher's current position if the caller moves it along the push);
-    direction (B,): push direction (rad, world); speed (B,): push speed (m/s); camera: the
-    camera model of the images; footprint (B, V, 2) or None: footprint polygon (m, object
-    frame), used by `ComInFootprintConstraint`; pad_window (B, 4, 2) or None: the pad's
-    positions at samples t-2, t-1, t, t+1 around the step that ends at t (m, world; the
-    robot's kinematics, see `with_pad_track`), step_dt the time between samples (s): the
-    physics-structured models read the pad's velocity and acceleration from them;
-    release (B, 3) or None: when each push's pad starts to stop, its speed then and its
-    deceleration (`testbed.push.release_point`; t_r = inf for a push that never stops), and
-    time (B,) or None: the time of sample t since the push began (s), for the free slide of
-    a released object (`models.physics.free_slide_gap`).
-    """
-
-    mask0: torch.Tensor
-    pose0: torch.Tensor
-    contact_xy: torch.Tensor
-    direction: torch.Tensor
-    speed: torch.Tensor
-    camera: CameraModel
-    footprint: torch.Tensor | None = None
-    pad_window: torch.Tensor | None = None
-    step_dt: float = 0.1
-    release: torch.Tensor | None = None
-    time: torch.Tensor | None = None
-    _cache: dict = field(default_factory=dict, init=False, repr=False, compare=False)
-
-    def action_map(self, config: ActionMapConfig, dtype: torch.dtype) -> torch.Tensor:
-        """M_t (B, 1, H, W) of this push (`geometry.action_maps.action_map`). Cached per
-        (config, dtype) unless a push tensor requires grad."""
-        key = (config, dtype)
-        needs_grad = any(t.requires_grad for t in (self.contact_xy, self.direction, self.speed))
-        if needs_grad or key not in self._cache:
-            amap = action_map(
-                self.contact_xy.to(dtype),
-                self.direction.to(dtype),
-                self.speed.to(dtype),
-                self.camera,
-                config,
-            )
-            if needs_grad:
-                return amap
-            self._cache[key] = amap
-        return self._cache[key]
-
-    def validate(self, batch: int) -> None:
-        """Raise `ShapeError` unless every tensor has batch size `batch` and its shape above."""
-        cam = self.camera
-        expect_shape(
-            self.mask0,
-            "context.mask0",
-            [("B", batch), ("1", 1), ("H", cam.height), ("W", cam.width)],
-        )
-        expect_shape(self.pose0, "context.pose0", [("B", batch), ("3", 3)])
-        expect_shape(self.contact_xy, "context.contact_xy", [("B", batch), ("2", 2)])
-        expect_shape(self.direction, "context.direction", [("B", batch)])
-        expect_shape(self.speed, "context.speed", [("B", batch)])
-        if self.footprint is not None:
-            expect_shape(self.footprint, "context.footprint", [("B", batch), ("V", None), ("2", 2)])
-        if self.pad_window is not None:
-            expect_shape(self.pad_window, "context.pad_window", [("B", batch), ("4", 4), ("2", 2)])
-        if self.release is not None:
-            expect_shape(self.release, "context.release", [("B", batch), ("3", 3)])
-        if self.time is not None:
-            expect_shape(self.time, "context.time", [("B", batch)])
-
-    def pad_kinematics(self) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        """The pad's velocity over the step (B, 2) (m/s, backward difference t-1 → t) and its
-        accelerations at t and at t-1 (B, 2) (m/s², centred differences), world frame."""
-        if self.pad_window is None:
-            raise ShapeError("this model needs the pad's track: build contexts with with_pad_track")
-        w, dt = self.pad_window, self.step_dt
-        velocity = (w[:, 2] - w[:, 1]) / dt
-        accel = (w[:, 3] - 2 * w[:, 2] + w[:, 1]) / dt**2
-        accel_prev = (w[:, 2] - 2 * w[:, 1] + w[:, 0]) / dt**2
-        return velocity, accel, accel_prev
-
-    def pad_accelerating(self) -> torch.Tensor:
-        """(B,) bool: the pad's acceleration at t or t-1 exceeds `STEADY_ACCEL` (the step is
-        part of a push's dynamic phase)."""
-        _, accel, accel_prev = self.pad_kinematics()
-        return (accel.norm(dim=-1) > STEADY_ACCEL) | (accel_prev.norm(dim=-1) > STEADY_ACCEL)
-
-    def to(self, dtype: torch.dtype | None = None, device: torch.device | str | None = None):
-        """A copy with every tensor moved to dtype/device."""
-
-        def mv(t):
-            return _map_field(t, lambda x: x.to(device=device, dtype=dtype))
-
-        return PushContext(
-            mv(self.mask0),
-            mv(self.pose0),
-            mv(self.contact_xy),
-            mv(self.direction),
-            mv(self.speed),
-            self.camera,
-            mv(self.footprint),
-            mv(self.pad_window),
-            self.step_dt,
-            mv(self.release),
-            mv(self.time),
-        )
-
-
-def pad_windows(paths: torch.Tensor, t: torch.Tensor | int) -> torch.Tensor:
-    """Pad positions at samples t-2, t-1, t, t+1 (B, 4, 2) from pad paths (B, T, 2) (m) and
-    sample indices t (B,) or one int. Beyond either end the path is extended at constant
-    velocity (a recorded push ends while the pad still moves at its push speed)."""
-    b, n, _ = paths.shape
-    before = 2 * paths[:, :1] - paths[:, 1:2]
-    first = torch.cat([2 * before - paths[:, :1], before], dim=1)
-    last = 2 * paths[:, -1:] - paths[:, -2:-1]
-    ext = torch.cat([first, paths, last], dim=1)  # sample s at index s + 2
-    t = torch.as_tensor(t, device=paths.device).long().expand(b)
-    if int(t.min()) < 0 or int(t.max()) >= n:
-        raise IndexError(f"sample index outside the path of {n} samples")
-    idx = t[:, None] + torch.arange(4, device=paths.device)  # s - 2 .. s + 1, shifted by 2
-    return ext.gather(1, idx[..., None].expand(b, 4, 2))
-
-
-def with_pad_track(
-    context: PushContext, paths: torch.Tensor, t: torch.Tensor | int, step_dt: float
-) -> PushContext:
-    """`context` for the step that ends at sample t of pad paths (B, T, 2) (m, world): the pad
-    at its position at t, its window for the pad's velocity and acceleration, and the time
-    t · step_dt."""
-    b = paths.shape[0]
-    t_b = torch.as_tensor(t, device=paths.device).long().expand(b)
-    return dataclasses.replace(
-        context,
-        contact_xy=paths[torch.arange(b, device=paths.device), t_b],
-        pad_window=pad_windows(paths, t_b),
-        step_dt=float(step_dt),
-        time=t_b.to(paths.dtype) * float(step_dt),
-    )
-
-
-class EncodingConfig(Config):
-    """How sigma points are encoded. mode: see module docstring. crop_size: side (px) of the
-    encoder input window centred on the object (None: the whole image); the encoder's
-    image_size must equal it (or the camera's size when None). length_scale (m) normalises
-    positions in the features."""
-
-    mode: Literal["per_sigma", "mean"] = "mean"
-    crop_size: int | None = 32
-    length_scale: float = 0.1
-    action_map: ActionMapConfig = ActionMapConfig()
-
-
-def _world_to_grid(xy: torch.Tensor, camera: CameraModel) -> torch.Tensor:
-    """World (N, 2) → `grid_sample` coordinates (align_corners=False) of the camera image."""
-    f = camera.focal_px / camera.position[2]
-    cu, cv = camera.principal_point
-    u = cu + f * (xy[:, 0] - camera.position[0])
-    v = cv - f * (xy[:, 1] - camera.position[1])
-    return torch.stack([(2 * u + 1) / camera.width - 1, (2 * v + 1) / camera.height - 1], -1)
-
-
-class ShapeActionEncoding(nn.Module):
-    """ShapeActionEncoderNet applied to [Ŝ(pose), M_t], shared by the dynamics and observation
-    models (one set of weights)."""
-
-    def __init__(self, encoder: ShapeActionEncoderNet, config: EncodingConfig = EncodingConfig()):
-        super().__init__()
-        self.encoder = encoder
-        self.config = config
-
-    def images(self, pose: torch.Tensor, context: PushContext, amap: torch.Tensor) -> torch.Tensor:
-        """Encoder input (N, 2, S, S) for poses (N, 3); rows of context tensors and `amap`
-        (N, 1, H, W) already repeated to N."""
-        cam, crop = context.camera, self.config.crop_size
-        n = pose.shape[0]
-        mask0 = context.mask0.to(pose.dtype)
-        pose0 = context.pose0.to(pose.dtype)
-        if crop is None:
-            return torch.cat([warp_mask(mask0, pose, pose0, cam), amap], dim=1)
-        centre = _world_to_grid(pose[:, :2], cam)  # (N, 2)
-        scale = pose.new_tensor([crop / cam.width, crop / cam.height])
-        crop_theta = torch.cat([torch.diag_embed(scale.expand(n, 2)), centre.unsqueeze(-1)], -1)
-        full = warp_affine_theta(pose, pose0, cam)  # (N, 2, 3): output → S_0 coordinates
-        mask_theta = torch.cat(
-            [
-                full[..., :2] @ crop_theta[..., :2],
-                full[..., :2] @ crop_theta[..., 2:] + full[..., 2:],
-            ],
-            dim=-1,
-        )
-        size = [n, 1, crop, crop]
-        grid_mask = F.affine_grid(mask_theta, size, align_corners=False)
-        grid_amap = F.affine_grid(crop_theta, size, align_corners=False)
-        s_hat = F.grid_sample(
-            mask0, grid_mask, mode="bilinear", padding_mode="zeros", align_corners=False
-        )
-        m_crop = F.grid_sample(
-            amap, grid_amap, mode="bilinear", padding_mode="zeros", align_corners=False
-        )
-        return torch.cat([s_hat, m_crop], dim=1)
-
-    def forward(
-        self, pose: torch.Tensor, context: PushContext
-    ) -> tuple[torch.Tensor, torch.Tensor]:
-        """pose (B, S, 3) → (enc, anchor): encodings (B, S, E) and the pose each was computed at
-        (B, S, 3); in "mean" mode (B, 1, E) and (B, 1, 3), to broadcast over the points."""
-        b, s, _ = pose.shape
-        amap = context.action_map(self.config.action_map, pose.dtype)
-        if self.config.mode == "per_sigma":
-            flat = pose.reshape(b * s, 3)
-            ctx = _repeat_context(context, s)
-            imgs = self.images(flat, ctx, amap.repeat_interleave(s, dim=0))
-            return self.encoder(imgs).view(b, s, -1), pose
-        anchor = pose.mean(dim=1)  # (B, 3)
-        enc = self.encoder(self.images(anchor, context, amap))
-        return enc.unsqueeze(1), anchor.unsqueeze(1)
-
-
-def _repeat_context(context: PushContext, times: int) -> PushContext:
-    def rep(t):
-        return _map_field(t, lambda x: x.repeat_interleave(times, dim=0))
-
-    return PushContext(
-        rep(context.mask0),
-        rep(context.pose0),
-        rep(context.contact_xy),
-        rep(context.direction),
-        rep(context.speed),
-        context.camera,
-        rep(context.footprint),
-        rep(context.pad_window),
-        context.step_dt,
-        rep(context.release),
-        rep(context.time),
-    )
-
-
-def sigma_point_features(
-    states: torch.Tensor,
-    pose0: torch.Tensor,
-    anchor: torch.Tensor,
-    length_scale: float,
-    context: PushContext | None = None,
-) -> torch.Tensor:
-    """Network features (B, S, 12 + K) of states (B, S, 3 + K); pose0 (B, 3), anchor (B, S or
-    1, 3). The pad features come from context.contact_xy (the pad's position), direction and
-    speed (zeros without a context)."""
-    pose0 = pose0.to(states.dtype).unsqueeze(1)
-    rel = (states[..., :2] - pose0[..., :2]) / length_scale
-    dth = states[..., 2] - pose0[..., 2]
-    dev = states[..., :3] - anchor
-    if context is None:
-        pad = states.new_zeros(*states.shape[:-1], 5)
-    else:
-        th = states[..., 2]
-        c, s = th.cos(), th.sin()
-        d = context.contact_xy.to(states.dtype).unsqueeze(1) - states[..., :2]
-        px = (c * d[..., 0] + s * d[..., 1]) / length_scale
-        py = (-s * d[..., 0] + c * d[..., 1]) / length_scale
-        pd = context.direction.to(states.dtype).unsqueeze(1) - th
-        v = (context.speed.to(states.dtype) / SPEED_SCALE).unsqueeze(1).expand_as(px)
-        pad = torch.stack([px, py, pd.sin(), pd.cos(), v], dim=-1)
-    return torch.cat(
-        [
-            rel,
-            dth.sin().unsqueeze(-1),
-            dth.cos().unsqueeze(-1),
-            states[..., 3:],
-            dev[..., :2] / length_scale,
-            dev[..., 2:],
-            pad,
-        ],
-        dim=-1,
-    )
 
 
 class LearnedDynamics(DynamicsModel):
@@ -586,9 +286,6 @@ def build_learned_models(
 def _physics_models(
     config: LearnedModelsConfig, encoding: ShapeActionEncoding, vision_only: bool
 ) -> LearnedModels:
-    from pushtoknow.models import physics  # builds on this module's context and encoding
-    from pushtoknow.models.networks import PhysicsProcessNet, PhysicsTacNet
-
     if vision_only or config.include_contact or config.param_dim != 5:
         raise ValueError(
             "physics-structured models need tactile observations without the contact "

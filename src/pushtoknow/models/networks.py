@@ -81,7 +81,7 @@ class EncoderConfig(Config):
     """ShapeActionEncoderNet: 3 conv layers + 2 FC on [Ŝ_t, M_t] (2 channels).
 
     image_size: side of the (square) encoder input in pixels: the camera image, or the crop
-    around the object when the learned models crop (see `models.learned.EncodingConfig`).
+    around the object when the learned models crop (see `models.encoding.EncodingConfig`).
     """
 
     in_channels: int = 2

@@ -48,11 +48,10 @@ from pushtoknow.models.contact import (
     pressure_moment_arm,
     radius_of_gyration,
 )
-from pushtoknow.models.learned import (
+from pushtoknow.models.context import STEADY_ACCEL, PushContext
+from pushtoknow.models.encoding import (
     POSE_DIM,
     SPEED_SCALE,
-    STEADY_ACCEL,
-    PushContext,
     ShapeActionEncoding,
     sigma_point_features,
 )

@@ -104,3 +104,113 @@ def footprint_seen(
     depth (H, W) m."""
     mask = s0 if outline_mask is None else outline_mask
     return footprint_from_mask(mask, camera, pose0, z=object_top(depth, s0, camera))
+
+
+# The outline the simulator replays (`replay_outline`): traced with little smoothing, its straight
+# edges fitted and extended to meet, so corners are as sharp as the object's. Smoothing rounds a
+# corner of angle α by about σ / sin(α/2): 5 mm of it clips a 35° tip by 16 mm.
+REPLAY_SMOOTHING = OUTLINE_SMOOTHING  # m: a staircase-free outline (its corners are refitted)
+REPLAY_SIMPLIFY = 0.0015  # m: Douglas–Peucker tolerance finding the edges
+REPLAY_MIN_EDGE = 0.012  # m: edges this long are fitted as lines; shorter ones are corner bevels
+REPLAY_MIN_TURN = math.radians(20.0)  # adjacent fitted edges turning less meet as traced
+REPLAY_MAX_EXTENSION = 0.012  # m: a corner is refitted at most this far beyond the contour
+REPLAY_STRAIGHTNESS = 2e-4  # m: an edge is straight where its contour points lie this close
+REPLAY_CLIP_SLACK = 0.001  # m: a refitted corner lies at most this beyond the clip smoothing makes
+
+
+def _fit_line(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """Total least squares line through points (N, 2): (point on it, unit direction, RMS
+    distance of the points from it)."""
+    c = points.mean(axis=0)
+    _, sv, vt = np.linalg.svd(points - c, full_matrices=False)
+    return c, vt[0], float(sv[-1] / np.sqrt(len(points)))
+
+
+def sharpen_corners(contour: np.ndarray) -> np.ndarray:
+    """A polygon (V, 2) for a traced closed contour (N, 2), CCW. Douglas–Peucker edges at least
+    `REPLAY_MIN_EDGE` long whose middle contour points lie on a line (RMS below
+    `REPLAY_STRAIGHTNESS`) are refitted to those points; two such edges separated only by
+    curved or short ones (a corner smoothing rounded off) are extended to meet, where they turn
+    by more than `REPLAY_MIN_TURN` and meet no farther beyond the contour than smoothing rounds
+    a corner of that angle (`_rounded_corner`). Curves stay as traced."""
+    from shapely.geometry import Polygon
+
+    pts = np.asarray(contour, dtype=np.float64)
+    traced = Polygon(pts).buffer(0)
+    pts = resample(pts, max(len(pts), int(traced.length / 5e-4)))  # ≥ 1 point per 0.5 mm
+    rough = traced.simplify(REPLAY_SIMPLIFY)
+    if rough.geom_type != "Polygon":
+        return pts
+    v = np.asarray(rough.exterior.coords)[:-1]
+    if not Polygon(v).exterior.is_ccw:
+        v = v[::-1]
+    k = len(v)
+    lines: list[tuple[np.ndarray, np.ndarray] | None] = []
+    for i in range(k):
+        a, b = v[i], v[(i + 1) % k]
+        length = float(np.linalg.norm(b - a))
+        line = None
+        if length >= REPLAY_MIN_EDGE:
+            d = (b - a) / length
+            t = (pts - a) @ d
+            off = np.abs((pts - a) @ np.array([-d[1], d[0]]))
+            near = (t > 0.2 * length) & (t < 0.8 * length) & (off < 2 * REPLAY_SIMPLIFY)
+            if near.sum() >= 3:
+                p, e, rms = _fit_line(pts[near])
+                if rms < REPLAY_STRAIGHTNESS:
+                    line = (p, e if e @ d > 0 else -e)
+        lines.append(line)
+    straight = [i for i in range(k) if lines[i] is not None]
+    if len(straight) < 2:
+        return v
+    out: list[np.ndarray] = []
+    for j, i in enumerate(straight):
+        nxt = straight[(j + 1) % len(straight)]
+        chain = [v[(m + 1) % k] for m in range(i, i + ((nxt - i) % k or k))]  # traced corners
+        (p, d), (q, e) = lines[i], lines[nxt]
+        cross = d[0] * e[1] - d[1] * e[0]
+        turn = math.atan2(cross, float(d @ e))
+        corner = None
+        if abs(turn) > REPLAY_MIN_TURN:
+            s = ((q - p)[0] * e[1] - (q - p)[1] * e[0]) / cross
+            x = p + s * d
+            if _rounded_corner(x, turn, traced):
+                corner = x
+        out.extend([corner] if corner is not None else chain)
+    poly = Polygon(out)
+    if not poly.is_valid or abs(poly.area / Polygon(pts).area - 1.0) > 0.15:
+        return v
+    return np.asarray(out)
+
+
+def _rounded_corner(x: np.ndarray, turn: float, traced) -> bool:
+    """Whether a corner at x (2,) turning by `turn` (rad) lies no farther outside the traced
+    contour than smoothing by `REPLAY_SMOOTHING` rounds such a corner off: a corner of
+    interior angle α rounded to radius r lies r (1 / sin(α/2) − 1) beyond its arc; r is taken
+    as 2σ, plus `REPLAY_CLIP_SLACK`, and never more than `REPLAY_MAX_EXTENSION`: the end of
+    an elongated ellipse looks like a rounded corner too, and this bounds what a wrong guess
+    costs."""
+    from shapely.geometry import Point
+
+    half = 0.5 * (math.pi - abs(turn))
+    clip = 2.0 * REPLAY_SMOOTHING * (1.0 / math.sin(half) - 1.0) + REPLAY_CLIP_SLACK
+    return traced.exterior.distance(Point(*x)) <= min(clip, REPLAY_MAX_EXTENSION)
+
+
+def replay_outline(
+    s0: np.ndarray,
+    depth: np.ndarray,
+    outline_mask: np.ndarray | None,
+    camera: CameraModel,
+    pose0,
+) -> np.ndarray:
+    """The footprint (V, 2) a simulator replays the pushes with, in the object frame of pose0
+    (x, y, θ): traced on the outline-resolution mask (else S_0) with `REPLAY_SMOOTHING`, on the
+    plane of the object's top, corners sharpened (`sharpen_corners`), about the traced
+    contour's centroid."""
+    mask = s0 if outline_mask is None else outline_mask
+    c = mask_contour(mask, camera, object_top(depth, s0, camera), smoothing=REPLAY_SMOOTHING)
+    poly = sharpen_corners(c.points) - c.centroid
+    th = -float(pose0[2])
+    rot = np.array([[math.cos(th), -math.sin(th)], [math.sin(th), math.cos(th)]])
+    return poly @ rot.T

@@ -15,6 +15,7 @@ import torch
 import torch.nn.functional as F
 
 from pushtoknow.common.camera import CameraModel
+from pushtoknow.geometry.affordances import mask_contour
 from pushtoknow.geometry.warp import marker_mask, warp_mask
 from pushtoknow.models.networks import VisNet
 from pushtoknow.testbed.objects import DEFAULT_HEIGHT
@@ -67,3 +68,37 @@ def frames_as_tensors(rgb: np.ndarray, depth: np.ndarray, camera: CameraModel) -
     r = torch.as_tensor(rgb).permute(0, 3, 1, 2).float() / 255.0
     d = torch.as_tensor(depth, dtype=torch.float32)[:, None]
     return rgbd_input(r, d, camera)
+
+
+@torch.no_grad()
+def start_pose(
+    net: VisNet,
+    camera: CameraModel,
+    view,
+    initial_pose: np.ndarray | None,
+    previous: tuple[np.ndarray, np.ndarray, np.ndarray] | None,
+) -> np.ndarray:
+    """(3,) the object's pose (x, y, θ) at a push's start, seen in `view`
+    (`testbed.executor.View`). Before the first push (`previous` None) the given initial pose,
+    which defines the object frame, or S_0's centroid with θ = 0; later VisNet's measurement
+    against the previous push's S_0 at its start pose, about the previous push's last pose
+    moved by the executor's re-centring. previous: (S_0 (H, W), pose0 (3,), last pose (3,))."""
+    if previous is None:
+        if initial_pose is not None:
+            return np.asarray(initial_pose, dtype=float)
+        c = mask_contour(view.s0, camera).centroid
+        return np.array([c[0], c[1], 0.0])
+    s0_prev, pose0_prev, last_pose = previous
+    ref = np.array(last_pose, dtype=np.float64)
+    if view.moved_by is not None:
+        ref[:2] += np.asarray(view.moved_by)
+    rgbd = frames_as_tensors(view.rgb[None], view.depth[None], camera)
+    meas = visnet_measure(
+        net,
+        rgbd,
+        torch.as_tensor(s0_prev, dtype=torch.float32)[None, None],
+        torch.as_tensor(pose0_prev, dtype=torch.float32)[None],
+        torch.as_tensor(ref, dtype=torch.float32)[None],
+        camera,
+    )
+    return meas[0].double().numpy()

@@ -24,7 +24,8 @@ from gymnasium import spaces
 from pushtoknow.geometry.affordances import mask_contour
 from pushtoknow.testbed.config import SimConfig
 from pushtoknow.testbed.executor import SimulatedExecutor, View
-from pushtoknow.testbed.objects import ObjectSpec, build_catalogue, load_object_spec
+from pushtoknow.testbed.object_refs import load_object_spec
+from pushtoknow.testbed.objects import ObjectSpec, build_catalogue
 from pushtoknow.testbed.push import Push
 
 MAX_DEVIATION = math.radians(5.0)

@@ -10,7 +10,8 @@ Specs are read from JSON/YAML:
     com: [0.01, -0.005]     # m, object frame (origin at the footprint centroid)
     inertia: 0.9e-3         # kg·m² about the vertical axis through the CoM
 
-Catalogue objects are addressable as ``catalogue:ID`` (ID in 0..824).
+Catalogue objects are addressable as ``catalogue:ID`` (ID in 0..824), random-shape objects
+(`random_shapes`) as ``random:SEED:I``; `object_refs.load_object_spec` resolves both.
 
 The vertices of a `polygon` shape are given in the object frame too, about their area centroid:
 an off-centroid polygon is refused with its offset, since moving it silently would leave the
@@ -27,13 +28,11 @@ import json
 import math
 from dataclasses import dataclass, field
 from functools import lru_cache
-from pathlib import Path
 
 import numpy as np
-import yaml
 from shapely.geometry import Point
 
-from pushtoknow.common.errors import ObjectSpecError, yaml_error_summary
+from pushtoknow.common.errors import ObjectSpecError
 from pushtoknow.common.params import CATALOGUE_GRID, PARAM_RANGES, ObjectParams
 from pushtoknow.testbed.config import CameraConfig, PadConfig
 from pushtoknow.testbed.shapes import (
@@ -274,31 +273,6 @@ def validate_catalogue_params(p: ObjectParams, footprint: Footprint) -> None:
         raise ObjectSpecError(
             "com", [p.com_x, p.com_y], f"not {CATALOGUE_COM_MARGIN} m inside the footprint"
         )
-
-
-def load_object_spec(source: str | Path) -> ObjectSpec:
-    """Object from ``catalogue:ID``, a JSON/YAML file path, or an inline JSON string."""
-    s = str(source)
-    if s.startswith("catalogue:"):
-        key = s.split(":", 1)[1]
-        try:
-            idx = int(key)
-        except ValueError:
-            raise ObjectSpecError("catalogue id", key, "must be an integer 0..824") from None
-        return catalogue_object(idx)
-    if s.lstrip().startswith("{"):
-        try:
-            return ObjectSpec.from_dict(json.loads(s))
-        except json.JSONDecodeError as e:
-            raise ObjectSpecError("<inline json>", s[:60], f"not valid JSON: {e}") from None
-    path = Path(s)
-    if not path.exists():
-        raise ObjectSpecError("<file>", s, "no such file (and not of the form catalogue:ID)")
-    try:
-        data = yaml.safe_load(path.read_text())  # YAML is a superset of JSON
-    except yaml.YAMLError as e:
-        raise ObjectSpecError("<file>", s, yaml_error_summary(e)) from None
-    return ObjectSpec.from_dict(data)
 
 
 @dataclass(frozen=True)

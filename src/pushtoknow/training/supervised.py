@@ -21,7 +21,8 @@ import torch.nn.functional as F
 from pydantic import Field
 
 from pushtoknow.common.config import Config
-from pushtoknow.models.learned import LearnedModels, PushContext, with_pad_track
+from pushtoknow.models.context import PushContext, with_pad_track
+from pushtoknow.models.learned import LearnedModels
 from pushtoknow.training.data import PushTensors
 
 

@@ -1,0 +1,341 @@
+"""The simulator as a dual filter's model: the parameter belief updated push by push from the
+replay of each executed push (docs/DESIGN.md §12).
+
+The belief is a Gaussian over the fit coordinates u (5,) of `prior.fit_transform` (log μ·m,
+log m at fixed μ·m, c_x, c_y, log I_z, normalised). After a push, the update is the iterated
+(Gauss–Newton) Kalman update of that push's measurements, i.e. the maximum a posteriori u of
+
+    Σ ρ(r_i(u)) + ½ (u − ū)ᵀ P⁻¹ (u − ū),
+
+r the push's replayed force and pose track against the observed one in noise units (ρ Huber
+on the force), ū, P the belief before the push; Levenberg–Marquardt steps with forward-difference
+Jacobians from batched replays. The posterior covariance is the Laplace one at that point
+(`fit.laplace_posterior`): directions the push carries less than `flat_information` times the
+prior's information about keep the prior's width and mean. Each channel group's noise is raised
+to the push's own misfit where the replay cannot reproduce it (a perceived outline or pose track
+the replay only approximates), counted by its effective number of samples, so model error
+widens the intervals instead of narrowing them.
+
+`expected_information` scores candidate pushes by the entropy the same update would remove:
+½ log det(I + P^½ JᵀWJ P^½) with J the candidate's replay Jacobian at the belief's mean.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from pydantic import Field
+
+from pushtoknow.common.config import Config
+from pushtoknow.identification.fit import (
+    QUASI_STATIC_BLIND,
+    QUASI_STATIC_SPEED,
+    laplace_posterior,
+    misfit_noise_scale,
+)
+from pushtoknow.identification.replay import PushTrack, ReplayScene, RolloutPool
+from pushtoknow.identification.residuals import (
+    OFFSET_UNIT,
+    ReplayResiduals,
+    huber_cost,
+    huber_weights,
+)
+
+
+class PhysicsFilterConfig(Config):
+    """How the physics filter weighs a push and searches its update.
+
+    The pose track is weighted as measured to `position_noise` / `angle_noise` per sample
+    (perception's accuracy), the force with the recording's noise (`force_noise` None: the
+    tactile noise of the simulation settings, 0.1 N where those have none)."""
+
+    force_noise: float | None = Field(None, gt=0, description="N; None: the recording's")
+    position_noise: float = Field(2e-3, gt=0, description="m, per pose sample")
+    angle_noise: float = Field(math.radians(2.0), gt=0, description="rad, per pose sample")
+    huber: float = Field(3.0, gt=0, description="force residuals beyond this many std: linear")
+    max_iterations: int = Field(6, ge=1, description="Gauss–Newton iterations per update")
+    max_step: float = Field(0.5, gt=0, description="largest change of a fit coordinate per step")
+    step_tolerance: float = Field(1e-2, gt=0, description="stop when no coordinate moves more")
+    cost_tolerance: float = Field(0.05, gt=0, description="stop when the objective drops less")
+    fd_steps: tuple[float, float, float, float, float] = Field(
+        (0.01, 0.1, 0.02, 0.02, 0.15),
+        description="finite-difference step of each fit coordinate (normalised units)",
+    )
+    flat_information: float = Field(
+        10.0,
+        ge=0,
+        description="a direction with less information than this × the prior's "
+        "keeps the prior's width and mean",
+    )
+    information_scale: float = Field(
+        0.5,
+        gt=0,
+        le=1,
+        description="share of a push's data information the update keeps (as `identify`'s): "
+        "the replay's step-to-step jitter and an optimum located only to within it",
+    )
+    poor_fit_chi2: float = Field(
+        2.0,
+        gt=0,
+        description="a push whose reduced χ² stays above this (the replay cannot reproduce "
+        "it) reveals neither m at fixed μ·m nor I_z: its misfit there is model error",
+    )
+    inflation: tuple[float, ...] = Field(
+        (100.0,),
+        description="factors the belief's covariance is inflated by, in turn, when a push "
+        "cannot be reproduced from it (the belief was too sure); () never",
+    )
+    coarse_pose_factor: float = Field(
+        10.0,
+        ge=1,
+        description="an update still poor after its descent descends once more with the pose "
+        "noise this many times larger, then again under the true noise (1: never)",
+    )
+    misfit_noise: bool = Field(
+        True, description="raise each channel's noise to the push's misfit where it is larger"
+    )
+    workers: int = Field(2, ge=1, description="replay processes")
+    contact_offset_std: float = Field(
+        1.5e-3,
+        ge=0,
+        description="m: prior std of where the object's edge lies along a push's line relative "
+        "to the outline seen (the traced outline's error at the contact), estimated with each "
+        "update and marginalised (0: the outline seen is exact)",
+    )
+    offset_fd_step: float = Field(0.3, gt=0, description="finite-difference step of an offset, mm")
+    com_floor: float = Field(
+        1e-3,
+        ge=0,
+        description="m: std of the CoM relative to the true outline added to the reported CoM "
+        "(in quadrature): the traced outline's placement error (~0.4 px of the 256 px outline "
+        "mask), which no number of pushes averages away",
+    )
+    inertia_floor: float = Field(
+        0.1, ge=0, description="std of log I_z added to the reported I_z in quadrature"
+    )
+    look_ahead_candidates: int = Field(
+        8, ge=1, description="candidates an active policy scores with replays"
+    )
+
+
+@dataclass(frozen=True)
+class PhysicsUpdate:
+    """One push's update: mean (5,), cov (5, 5) in fit coordinates; chi2: reduced χ² of the
+    push's misfit under the configured noise; noise_scale (5,): the factors the noise was raised
+    by; information (D,): the push's data information in prior-whitened directions (the
+    contact offset's included), ascending; identified: how many directions it revealed;
+    replays: single-push replays it took; iterations: Gauss–Newton iterations; poor_fit: the
+    replay could not reproduce the push (`poor_fit_chi2`); contact_offset (m): where the
+    object's edge lay along the push line relative to the outline seen; inflation: the factor
+    the belief's covariance was inflated by before the update (its largest per coordinate; 1:
+    none)."""
+
+    mean: np.ndarray
+    cov: np.ndarray
+    chi2: float
+    noise_scale: np.ndarray
+    information: np.ndarray
+    identified: int
+    replays: int
+    iterations: int
+    poor_fit: bool = False
+    contact_offset: float = 0.0
+    inflation: float = 1.0
+
+
+def iterated_update(
+    mean: np.ndarray,
+    cov: np.ndarray,
+    track: PushTrack,
+    scene: ReplayScene,
+    pool: RolloutPool,
+    sigmas: np.ndarray,
+    config: PhysicsFilterConfig,
+    extra_starts: Sequence[np.ndarray] = (),
+    ceiling: np.ndarray | None = None,
+) -> PhysicsUpdate:
+    """The belief (mean (5,), cov (5, 5), fit coordinates) after one push (module doc).
+    `extra_starts`: other points to start the search from (the best of them and the mean, by
+    objective, is refined), e.g. a closed-form reading of the first push.
+
+    A push the replay cannot reproduce from the belief (reduced χ² above `poor_fit_chi2`) may
+    say the belief was too sure of itself: the update is repeated from the belief's covariance
+    inflated by each of `inflation` in turn (an adaptive, fading-memory filter), each
+    coordinate's variance at most the `ceiling` covariance's (5, 5) (the prior's; None: no
+    bound), and the first that fits is kept. If none fits, the push is one the replay cannot
+    reproduce at all, and the uninflated update stands."""
+    first = _update_once(mean, cov, track, scene, pool, sigmas, config, extra_starts)
+    replays = first.replays
+    for factor in config.inflation if first.poor_fit else ():
+        d = np.full(len(mean), factor)
+        if ceiling is not None:
+            d = np.clip(np.diagonal(ceiling) / np.diagonal(cov), 1.0, factor)
+        wide = np.sqrt(d)[:, None] * cov * np.sqrt(d)[None, :]
+        up = _update_once(mean, wide, track, scene, pool, sigmas, config, extra_starts)
+        replays += up.replays
+        if not up.poor_fit:
+            return dataclasses.replace(up, inflation=float(np.max(d)), replays=replays)
+    return dataclasses.replace(first, replays=replays)
+
+
+def _update_once(
+    mean: np.ndarray,
+    cov: np.ndarray,
+    track: PushTrack,
+    scene: ReplayScene,
+    pool: RolloutPool,
+    sigmas: np.ndarray,
+    config: PhysicsFilterConfig,
+    extra_starts: Sequence[np.ndarray] = (),
+) -> PhysicsUpdate:
+    """One update of `iterated_update` from the belief (mean, cov), without inflation."""
+    cfg = config
+    res = ReplayResiduals(scene, [track], pool, sigmas)
+    n = res.n_data
+    before = pool.push_rollouts
+    offset = cfg.contact_offset_std > 0
+    if offset:  # the push's contact offset joins the state (mm), marginalised at the end
+        mean = np.append(mean, 0.0)
+        cov = np.pad(cov, ((0, 1), (0, 1)))
+        cov[5, 5] = (cfg.contact_offset_std / OFFSET_UNIT) ** 2
+        extra_starts = [np.append(u, 0.0) for u in extra_starts]
+    dim = len(mean)
+    p_inv = np.linalg.inv(cov)
+
+    def cost(r: np.ndarray, u: np.ndarray) -> float:
+        d = u - mean
+        return (
+            huber_cost(r[:n], cfg.huber, res.robust)
+            + 0.5 * float(r[n:] @ r[n:])
+            + 0.5 * d @ p_inv @ d
+        )
+
+    starts = np.stack([mean, *extra_starts])
+    r_starts = res.residuals(starts)
+    costs = [cost(r, u) for r, u in zip(r_starts, starts)]
+    best = int(np.argmin(costs))
+    u, r, c = starts[best].copy(), r_starts[best], costs[best]
+    fd = np.asarray([*cfg.fd_steps, cfg.offset_fd_step][:dim], dtype=np.float64)
+    iterations = 0
+
+    def jacobian(u: np.ndarray, r: np.ndarray) -> np.ndarray:
+        rj = res.residuals(u[None] + np.diag(fd))
+        return ((rj - r[None]) / fd[:, None]).T  # (n + 2, dim)
+
+    def descend(u, r, c):
+        """Levenberg–Marquardt from u (residuals r, objective c) → (u, r, c, jac, step)."""
+        nonlocal iterations
+        lam, step = 1e-2, np.zeros(dim)
+        jac = jacobian(u, r)
+        for _ in range(cfg.max_iterations):
+            iterations += 1
+            w = np.concatenate([huber_weights(r[:n], cfg.huber, res.robust), np.ones(len(r) - n)])
+            h = jac.T @ (w[:, None] * jac) + p_inv
+            g = jac.T @ (w * r) + p_inv @ (u - mean)
+            moved, previous = False, c
+            for _ in range(3):
+                step = np.linalg.solve(h + lam * np.diag(np.diagonal(h)), -g)
+                step *= min(1.0, cfg.max_step / max(np.max(np.abs(step)), 1e-300))
+                trial = u + step
+                rt = res.residuals(trial[None])[0]
+                ct = cost(rt, trial)
+                if ct < c:
+                    u, r, c, lam = trial, rt, ct, max(lam / 3.0, 1e-6)
+                    moved = True
+                    break
+                lam *= 4.0
+            if not moved:
+                step = np.zeros(dim)
+                break
+            jac = jacobian(u, r)
+            if np.max(np.abs(step)) < cfg.step_tolerance or previous - c < cfg.cost_tolerance:
+                break
+        return u, r, c, jac, step
+
+    u, r, c, jac, step = descend(u, r, c)
+    if float(np.sum(r[:n] ** 2) / max(n - 5, 1)) > cfg.poor_fit_chi2 and cfg.coarse_pose_factor > 1:
+        # stuck where the pose misfit's landscape is rough (a CoM far from the start): descend
+        # once with the pose track weighted as if `coarse_pose_factor` times noisier (led by
+        # the force), then again under the true weights; kept if the objective is lower
+        true_sigmas = res.sigmas.copy()
+        res.sigmas[2:] *= cfg.coarse_pose_factor
+        u_c = descend(u, res.residuals(u[None])[0], np.inf)[0]
+        res.sigmas = true_sigmas
+        r_c = res.residuals(u_c[None])[0]
+        fit = descend(u_c, r_c, cost(r_c, u_c))
+        if fit[2] < c:
+            u, r, c, jac, step = fit
+
+    chi2 = float(np.sum(r[:n] ** 2) / max(n - dim, 1))
+    raised = np.ones(5)
+    if cfg.misfit_noise:
+        raised = np.maximum(misfit_noise_scale(r[:n].reshape(-1, 5), res.push_lengths), 1.0)
+    row_scale = np.concatenate([np.tile(1.0 / raised, n // 5), np.ones(len(r) - n)])
+    r_w = r * row_scale
+    jac_w = jac * row_scale[:, None]
+    w = np.concatenate([huber_weights(r_w[:n], cfg.huber, res.robust), np.ones(len(r) - n)])
+    h_data = jac_w[:n].T @ (w[:n, None] * jac_w[:n])
+    quasi_static = track.push.profile == "constant" and track.push.speed <= QUASI_STATIC_SPEED
+    poor = chi2 > cfg.poor_fit_chi2
+    if quasi_static or poor:
+        # a quasi-static push reveals neither m at fixed μ·m nor I_z (docs/DESIGN.md §10); a
+        # push the replay cannot reproduce reads them off accelerations and spin-downs it
+        # does not match
+        h_data[QUASI_STATIC_BLIND, :] = 0.0
+        h_data[:, QUASI_STATIC_BLIND] = 0.0
+    post, lam_d, vecs, flat = laplace_posterior(
+        h_data, step, cov, cfg.flat_information, cfg.information_scale
+    )
+    # along a direction the push does not reveal, the mean stays the prior's
+    chol = np.linalg.cholesky(cov)
+    w_u = np.linalg.solve(chol, u - mean)
+    for j in np.where(flat)[0]:
+        w_u -= vecs[:, j] * float(vecs[:, j] @ w_u)
+    u = mean + chol @ w_u
+    return PhysicsUpdate(
+        mean=u[:5],
+        cov=post[:5, :5],  # the contact offset marginalised
+        chi2=chi2,
+        noise_scale=raised,
+        information=lam_d,
+        identified=int((~flat).sum()),
+        replays=pool.push_rollouts - before,
+        iterations=iterations,
+        poor_fit=poor,
+        contact_offset=float(u[5] * OFFSET_UNIT) if offset else 0.0,
+    )
+
+
+def expected_information(
+    mean: np.ndarray,
+    cov: np.ndarray,
+    tracks: Sequence[PushTrack],
+    scene: ReplayScene,
+    pool: RolloutPool,
+    sigmas: np.ndarray,
+    config: PhysicsFilterConfig,
+) -> np.ndarray:
+    """(C,) entropy (nats) each candidate push would remove from the belief (mean, cov): ½ log
+    det(I + Lᵀ JᵀWJ L), L = chol(cov), J the candidate's replay Jacobian at the mean (forward
+    differences); quasi-static candidates carry no information on m at fixed μ·m and I_z. The
+    tracks' observed force and pose are unused (zeros will do)."""
+    fd = np.asarray(config.fd_steps, dtype=np.float64)
+    probes = np.concatenate([mean[None], mean[None] + np.diag(fd)])
+    chol = np.linalg.cholesky(cov)
+    out = []
+    for track in tracks:
+        res = ReplayResiduals(scene, [track], pool, sigmas)
+        sims = np.stack(res.simulate(probes)) / res.sigmas  # (6, N, 5)
+        jac = ((sims[1:] - sims[0][None]) / fd[:, None, None]).reshape(5, -1).T
+        h = jac.T @ jac
+        if track.push.profile == "constant" and track.push.speed <= QUASI_STATIC_SPEED:
+            h[QUASI_STATIC_BLIND, :] = 0.0
+            h[:, QUASI_STATIC_BLIND] = 0.0
+        white = chol.T @ h @ chol
+        sign, logdet = np.linalg.slogdet(np.eye(5) + 0.5 * (white + white.T))
+        out.append(0.5 * logdet if sign > 0 else 0.0)
+    return np.asarray(out)

@@ -1,0 +1,285 @@
+"""The physics filter: a dual filter whose model is the simulator (docs/DESIGN.md §12), as an
+`Estimator`.
+
+Perception is the learned filter's (the paper's dual structure), except for the outline: the
+footprint is traced on the first push's mask with its corners kept sharp
+(`perception.footprint.replay_outline`) and fixes the object frame; each push's
+pose track is VisNet's, frame by frame, each frame's reference pose the previous measurement.
+The parameter belief (a Gaussian over `identification.prior.fit_transform`'s coordinates,
+starting at the catalogue prior) is updated after each push by replaying it in the testbed's
+scene with that footprint (`identification.recursive.iterated_update`), carried to the next
+push. Active policies score candidates by the entropy the same update would remove, from
+replays of the candidates at the belief's mean (`identification.recursive.expected_information`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+from collections.abc import Sequence
+
+import numpy as np
+import torch
+from shapely.geometry import Polygon
+
+from pushtoknow.active.selection import ScoreName
+from pushtoknow.common.estimate import com_region
+from pushtoknow.common.params import denormalise_params, normalise_params, space_scale
+from pushtoknow.identification.fit import (
+    UNKNOWN_FORCE_NOISE,
+    closed_form_start,
+    tracks_from_records,
+)
+from pushtoknow.identification.prior import (
+    fit_transform,
+    footprint_prior,
+    polygon_moments,
+    prior_moments,
+)
+from pushtoknow.identification.recursive import (
+    PhysicsFilterConfig,
+    PhysicsUpdate,
+    expected_information,
+    iterated_update,
+)
+from pushtoknow.identification.replay import PushTrack, ReplayScene, RolloutPool
+from pushtoknow.inference.estimator import (
+    Estimator,
+    InferenceConfig,
+    PushEstimate,
+    belief_to_estimate,
+)
+from pushtoknow.models.checkpoint import TrainedModel
+from pushtoknow.perception.footprint import object_top, replay_outline
+from pushtoknow.perception.visnet import frames_as_tensors, start_pose, visnet_measure
+from pushtoknow.testbed.config import SimConfig
+from pushtoknow.testbed.executor import View
+from pushtoknow.testbed.objects import COM_MARGIN, MIN_HEIGHT
+from pushtoknow.testbed.push import Push
+from pushtoknow.testbed.sim import PushRecord
+
+log = logging.getLogger(__name__)
+OUTLINE_SIMPLIFY = 2e-4  # m: the outline's vertices within this of a line are dropped
+
+
+def outline_shape(footprint: np.ndarray) -> tuple[dict, tuple[float, float]]:
+    """A polygon spec (`testbed.objects`) of a traced footprint (V, 2), object frame:
+    simplified and centred on its centroid, as the testbed requires; and that centroid's
+    position in the object frame (m), the replay's `frame_offset`."""
+    poly = Polygon(np.asarray(footprint, dtype=np.float64)).buffer(0).simplify(OUTLINE_SIMPLIFY)
+    if poly.geom_type != "Polygon":
+        poly = max(poly.geoms, key=lambda g: g.area)
+    c = poly.centroid
+    verts = np.asarray(poly.exterior.coords)[:-1] - np.array([c.x, c.y])
+    if Polygon(verts).exterior.is_ccw is False:
+        verts = verts[::-1]
+    return {"type": "polygon", "vertices": verts.tolist()}, (float(c.x), float(c.y))
+
+
+class PhysicsFilterEstimator(Estimator):
+    """The simulator-in-the-loop dual filter on pushes of one object (module doc). `model`
+    provides perception (VisNet, camera); `sim_config`: the testbed settings the pushes run
+    with; `seed` has nothing to draw (the update is deterministic)."""
+
+    name = "physics"
+
+    def __init__(
+        self,
+        model: TrainedModel,
+        config: InferenceConfig = InferenceConfig(),
+        seed: int = 0,
+        sim_config: SimConfig | None = None,
+        filter_config: PhysicsFilterConfig | None = None,
+    ):
+        self.model = model.eval()
+        self.config = config
+        self.filter_config = filter_config or PhysicsFilterConfig()
+        self.sim_config = (sim_config or model.sim_config).model_copy(update={"render": False})
+        self.camera = model.camera
+        self.tmat = fit_transform()
+        z, p_z = prior_moments()
+        self.mean = self.tmat @ z
+        self.cov = self.prior_cov = self.tmat @ p_z @ self.tmat.T
+        self.scene: ReplayScene | None = None
+        self.updates: list[PhysicsUpdate] = []
+        self._pool: RolloutPool | None = None
+        self._prev: tuple[np.ndarray, np.ndarray] | None = None  # (S_0, pose0) of last push
+        self._last_pose: np.ndarray | None = None
+        cfg = self.filter_config
+        tactile = self.sim_config.tactile.force_noise_std
+        force = cfg.force_noise or (tactile if tactile > 0 else UNKNOWN_FORCE_NOISE)
+        self.sigmas = np.array(
+            [force, force, cfg.position_noise, cfg.position_noise, cfg.angle_noise]
+        )
+
+    @property
+    def pool(self) -> RolloutPool:
+        if self._pool is None:
+            self._pool = RolloutPool(self.filter_config.workers)
+        return self._pool
+
+    def close(self) -> None:
+        if self._pool is not None:
+            self._pool.close()
+            self._pool = None
+
+    def belief_norm(self) -> tuple[np.ndarray, np.ndarray]:
+        """The belief over the normalised parameters, the CoM in the object frame: mean (5,),
+        cov (5, 5). (The filter's own CoM is in the replayed outline's centroid frame.)"""
+        t_inv = np.linalg.inv(self.tmat)
+        cov = t_inv @ self.cov @ t_inv.T
+        mean = t_inv @ self.mean
+        if self.scene is not None:
+            mean[2:4] += np.asarray(self.scene.frame_offset) / space_scale()[2:4]
+        return mean, 0.5 * (cov + cov.T)
+
+    def estimate(self, index: int, push: Push | None = None) -> PushEstimate:
+        """The belief as an estimate, with the outline's placement error (`com_floor`) and the
+        replay's I_z floor (`inertia_floor`) added in quadrature once pushes were seen."""
+        mean, cov = self.belief_norm()
+        if self.updates:
+            cfg, scale = self.filter_config, space_scale()
+            cov[2, 2] += (cfg.com_floor / scale[2]) ** 2
+            cov[3, 3] += (cfg.com_floor / scale[3]) ** 2
+            cov[4, 4] += (cfg.inertia_floor / scale[4]) ** 2
+        region = None
+        if self.scene is not None:
+            region = com_region(self.scene.footprint.vertices, COM_MARGIN)
+            region = region + np.asarray(self.scene.frame_offset)
+        return belief_to_estimate(index, mean, cov, push, region)
+
+    def _scene(self, view: View, pose0: np.ndarray) -> ReplayScene:
+        """The replay scene of the footprint seen in the first push's view (it fixes the
+        object frame) at the height seen in its depth."""
+        if self.scene is None:
+            fp = replay_outline(view.s0, view.depth, view.outline_mask, self.camera, pose0)
+            height = max(object_top(view.depth, view.s0, self.camera), MIN_HEIGHT)
+            shape, offset = outline_shape(fp)
+            self.scene = ReplayScene(shape, height, self.sim_config, offset)
+        return self.scene
+
+    def _prior_from_footprint(self, scene: ReplayScene) -> None:
+        """The prior once the footprint is seen (`prior.footprint_prior`): the CoM anywhere
+        in its convex hull, I_z about the uniform plate's."""
+        footprint = scene.footprint
+        region = footprint.com_region(COM_MARGIN)
+        if region.is_empty or region.geom_type != "Polygon":
+            return
+        poly = footprint.polygon
+        _, plate = polygon_moments(np.asarray(poly.exterior.coords)[:-1])
+        z, p_z = footprint_prior(
+            np.asarray(region.exterior.coords)[:-1], float(np.sqrt(np.trace(plate)))
+        )
+        self.mean = self.tmat @ z
+        self.cov = self.prior_cov = self.tmat @ p_z @ self.tmat.T
+
+    def start_pose(self, view: View, initial_pose: np.ndarray | None) -> np.ndarray:
+        """pose0 of the next push (`perception.visnet.start_pose`)."""
+        previous = None if self._prev is None else (*self._prev, self._last_pose)
+        return start_pose(self.model.visnet, self.camera, view, initial_pose, previous)
+
+    def _measure(self, rgb, depth, s0, pose0, ref) -> np.ndarray:
+        """VisNet's poses (N, 3) of frames rgb (N, H, W, 3), depth (N, H, W) against S_0 at
+        pose0, about reference poses ref (N, 3) or (3,)."""
+        frames = frames_as_tensors(rgb, depth, self.camera)
+        n = len(frames)
+        mask0 = torch.as_tensor(s0, dtype=torch.float32)[None, None].expand(n, -1, -1, -1)
+        p0 = torch.as_tensor(pose0, dtype=torch.float32)[None].expand(n, -1)
+        r = torch.as_tensor(np.broadcast_to(ref, (n, 3)).copy(), dtype=torch.float32)
+        return visnet_measure(self.model.visnet, frames, mask0, p0, r, self.camera).double().numpy()
+
+    @torch.no_grad()
+    def pose_track(self, record: PushRecord, view: View, pose0: np.ndarray) -> np.ndarray:
+        """(T, 3) the push's pose track seen by VisNet: frame t measured about frame t − 1's
+        measurement (pose0 at t = 0)."""
+        track = [np.asarray(pose0, dtype=np.float64)]
+        for t in range(1, len(record.time)):
+            z = self._measure(record.rgb[t : t + 1], record.depth[t : t + 1], view.s0, pose0,
+                              track[-1])  # fmt: skip
+            track.append(z[0])
+        return np.stack(track)
+
+    def update(self, record: PushRecord, view: View, pose0: np.ndarray) -> np.ndarray:
+        """The belief after the executed push (module doc); returns VisNet's pose track."""
+        scene = self._scene(view, pose0)
+        if record.rgb is not None:
+            poses = self.pose_track(record, view, pose0)
+        else:  # a recording with tracked poses and no images
+            poses = np.asarray(record.pose, dtype=np.float64)
+        seen = dataclasses.replace(record, pose=poses)
+        (track,) = tracks_from_records([seen], self.sim_config)
+        extra = []
+        if not self.updates:
+            self._prior_from_footprint(scene)
+            extra = self._closed_form_start(seen)
+        up = iterated_update(
+            self.mean,
+            self.cov,
+            track,
+            scene,
+            self.pool,
+            self.sigmas,
+            self.filter_config,
+            extra,
+            ceiling=self.prior_cov,
+        )
+        self.mean, self.cov = up.mean, up.cov
+        self.updates.append(up)
+        log.debug(
+            "push %d (%s): reduced chi2 %.2f, noise raised %s, information %s, %d replays, "
+            "%d iterations%s",
+            len(self.updates),
+            record.push.profile,
+            up.chi2,
+            np.round(up.noise_scale, 2),
+            np.round(up.information, 1),
+            up.replays,
+            up.iterations,
+            ", poor fit" if up.poor_fit else "",
+        )
+        self._prev = (view.s0, pose0)
+        self._last_pose = poses[-1]
+        return poses
+
+    def _closed_form_start(self, record: PushRecord) -> list[np.ndarray]:
+        """The prior's mean with μ·m (and m, μ after a release) read off the push in closed
+        form (`identification.fit.closed_form_start`), as a second start of the first update."""
+        cf = closed_form_start([record], self.sim_config)
+        if cf["mu_m"] is None:
+            return []
+        t_inv = np.linalg.inv(self.tmat)
+        z = t_inv @ self.mean
+        phi = denormalise_params(z)
+        mass = cf["mass"] if cf["mass"] is not None else phi[0]
+        phi[0], phi[1] = mass, cf["mu_m"] / mass
+        z_cf = normalise_params(phi)
+        return [self.tmat @ z_cf]
+
+    def information(
+        self,
+        candidates: Sequence[Push],
+        view: View,
+        pose0: np.ndarray,
+        score: ScoreName,
+        horizon_fraction: float,
+    ) -> np.ndarray:
+        """Entropy (nats) each candidate would remove, from replays at the belief's mean over
+        `horizon_fraction` of a push (`recursive.expected_information`; both scores rank by
+        it). Only the first `look_ahead_candidates` candidates are scored (the others get
+        −inf): each costs six replays."""
+        scene = self._scene(view, pose0)
+        horizon = self.sim_config.push.horizon * horizon_fraction
+        sim = self.sim_config.model_copy(
+            update={"push": self.sim_config.push.model_copy(update={"horizon": horizon})}
+        )
+        look = dataclasses.replace(scene, sim_config=sim)
+        k = min(len(candidates), self.filter_config.look_ahead_candidates)
+        tracks = []
+        for p in candidates[:k]:
+            samples = int(round(horizon * sim.tactile.rate_hz)) + 1
+            zeros = np.zeros((samples, 2))
+            tracks.append(PushTrack(p, None, np.asarray(pose0), zeros, np.zeros((samples, 3))))
+        scores = expected_information(
+            self.mean, self.cov, tracks, look, self.pool, self.sigmas, self.filter_config
+        )
+        return np.concatenate([scores, np.full(len(candidates) - k, -np.inf)])

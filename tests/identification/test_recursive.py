@@ -1,0 +1,191 @@
+"""The physics filter's update against exact references: on a simulator that is linear in the
+fit coordinates, the iterated update is the Kalman update and the expected information is the
+Gaussian entropy reduction."""
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from pushtoknow.common.params import normalise_params
+from pushtoknow.identification.prior import fit_transform, prior_moments
+from pushtoknow.identification.recursive import (
+    OFFSET_UNIT,
+    PhysicsFilterConfig,
+    expected_information,
+    iterated_update,
+)
+from pushtoknow.identification.replay import PushTrack, ReplayScene
+from pushtoknow.testbed.config import SimConfig
+from pushtoknow.testbed.push import Push
+
+T = 8  # samples per push
+SQUARE = {"type": "polygon", "vertices": [[-0.1, -0.1], [0.1, -0.1], [0.1, 0.1], [-0.1, 0.1]]}
+EXACT = PhysicsFilterConfig(
+    huber=1e9,
+    misfit_noise=False,
+    flat_information=0.0,
+    information_scale=1.0,
+    poor_fit_chi2=1e12,
+    max_iterations=30,
+    step_tolerance=1e-12,
+    cost_tolerance=1e-14,
+    max_step=10.0,
+    contact_offset_std=0.0,
+    inflation=(),
+)
+START = np.array([0.0, -0.12])
+SIGMAS = np.array([0.05, 0.05, 5e-4, 5e-4, 0.01])
+
+
+class LinearPool:
+    """A stand-in for `RolloutPool` whose replay of φ is A·u + b + g·s (u the fit coordinates,
+    s the pad's shift along the push from its recorded start, in `OFFSET_UNIT`)."""
+
+    def __init__(self, a: np.ndarray, b: np.ndarray, g: np.ndarray | None = None):
+        self.a, self.b = a, b
+        self.g = np.zeros(len(b)) if g is None else g
+        self.rollouts = self.push_rollouts = 0
+
+    def run_each(self, scene, phis, tracks):
+        tmat = fit_transform()
+        out = []
+        for phi, trs in zip(np.atleast_2d(phis), tracks, strict=True):
+            u = tmat @ normalise_params(phi)
+            shift = [float((tr.start - START) @ tr.push.unit) / OFFSET_UNIT for tr in trs]
+            out.append([(self.a @ u + self.b + self.g * s).reshape(T, 5) for s in shift])
+        self.rollouts += len(out)
+        self.push_rollouts += len(out) * len(tracks[0])
+        return out
+
+    def run(self, scene, phis, tracks):
+        return self.run_each(scene, phis, [tracks] * len(np.atleast_2d(phis)))
+
+
+def problem(seed: int, profile: str = "release"):
+    rng = np.random.default_rng(seed)
+    a = rng.normal(size=(T * 5, 5)) * SIGMAS.repeat(1)[np.arange(T * 5) % 5][:, None] * 3
+    b = rng.normal(size=T * 5) * 0.01
+    z, p_z = prior_moments()
+    tmat = fit_transform()
+    mean = tmat @ z
+    cov = 0.02 * tmat @ p_z @ tmat.T
+    truth = mean + np.linalg.cholesky(cov) @ rng.normal(size=5)
+    y = (a @ truth + b + rng.normal(size=T * 5) * np.tile(SIGMAS, T)).reshape(T, 5)
+    speed = 0.4 if profile == "release" else 0.02
+    track = PushTrack(
+        Push((0.0, -0.1), np.pi / 2, profile, speed), START.copy(), np.zeros(3), y[:, :2], y[:, 2:]
+    )
+    scene = ReplayScene(SQUARE, 0.013, SimConfig())
+    return a, b, mean, cov, track, scene
+
+
+def kalman(a, b, mean, cov, y):
+    """The exact posterior of u ~ N(mean, cov), y = A u + b + N(0, diag σ²), samples ≥ 1."""
+    rows = np.arange(5, T * 5)  # the first sample is the start state: not a measurement
+    w = np.diag(1.0 / np.tile(SIGMAS, T)[rows] ** 2)
+    ar, br, yr = a[rows], b[rows], y.reshape(-1)[rows]
+    post = np.linalg.inv(np.linalg.inv(cov) + ar.T @ w @ ar)
+    return post @ (np.linalg.solve(cov, mean) + ar.T @ w @ (yr - br)), post
+
+
+@settings(max_examples=15, deadline=None)
+@given(st.integers(0, 10_000))
+def test_the_iterated_update_is_the_kalman_update_on_a_linear_simulator(seed):
+    a, b, mean, cov, track, scene = problem(seed)
+    up = iterated_update(mean, cov, track, scene, LinearPool(a, b), SIGMAS, EXACT)
+    y = np.column_stack([track.force, track.pose])
+    want_mean, want_cov = kalman(a, b, mean, cov, y)
+    np.testing.assert_allclose(up.mean, want_mean, atol=1e-6 * np.sqrt(np.diag(cov)).max())
+    np.testing.assert_allclose(up.cov, want_cov, rtol=1e-5, atol=1e-12)
+    assert up.identified == 5 and not up.poor_fit
+
+
+def test_the_contact_offset_is_estimated_jointly_and_marginalised():
+    """With the pad's offset along the push in the state, the update is the Kalman update of
+    the augmented Gaussian (u, s), its u block the marginal."""
+    a, b, mean, cov, track, scene = problem(11)
+    rng = np.random.default_rng(11)
+    g = rng.normal(size=T * 5) * np.tile(SIGMAS, T) * 2
+    s_true, s_std = 1.2, 1.5  # mm
+    y = np.column_stack([track.force, track.pose]).reshape(-1) + g * s_true
+    y = y.reshape(T, 5)
+    track = PushTrack(track.push, track.start, track.pose0, y[:, :2], y[:, 2:])
+    cfg = EXACT.model_copy(update={"contact_offset_std": s_std * OFFSET_UNIT})
+    up = iterated_update(mean, cov, track, scene, LinearPool(a, b, g), SIGMAS, cfg)
+    aug_a = np.column_stack([a, g])
+    aug_mean = np.append(mean, 0.0)
+    aug_cov = np.pad(cov, ((0, 1), (0, 1)))
+    aug_cov[5, 5] = s_std**2
+    want_mean, want_cov = kalman(aug_a, b, aug_mean, aug_cov, y)
+    np.testing.assert_allclose(up.mean, want_mean[:5], atol=1e-6 * np.sqrt(np.diag(cov)).max())
+    np.testing.assert_allclose(up.cov, want_cov[:5, :5], rtol=1e-5, atol=1e-12)
+    assert up.contact_offset == pytest.approx(want_mean[5] * OFFSET_UNIT, abs=1e-9)
+
+
+def test_a_quasi_static_push_leaves_mass_at_fixed_mu_m_and_inertia_at_the_prior():
+    a, b, mean, cov, track, scene = problem(3, profile="constant")
+    up = iterated_update(mean, cov, track, scene, LinearPool(a, b), SIGMAS, EXACT)
+    added = np.linalg.inv(up.cov) - np.linalg.inv(cov)  # the push's information
+    scale = np.abs(added).max()
+    blind = [1, 4]  # log m at fixed μ·m, log I_z
+    np.testing.assert_allclose(added[blind], 0.0, atol=1e-6 * scale)
+    assert np.all(np.diag(added)[[0, 2, 3]] > 1e-3 * scale)
+
+
+def test_a_push_the_replay_cannot_reproduce_teaches_neither_mass_nor_inertia():
+    a, b, mean, cov, track, scene = problem(4)
+    bad = PushTrack(track.push, track.start, track.pose0, track.force + 1.0, track.pose)
+    cfg = EXACT.model_copy(update={"poor_fit_chi2": 2.0})
+    up = iterated_update(mean, cov, bad, scene, LinearPool(a, b), SIGMAS, cfg)
+    assert up.poor_fit and up.chi2 > 2.0
+    added = np.linalg.inv(up.cov) - np.linalg.inv(cov)
+    np.testing.assert_allclose(added[[1, 4]], 0.0, atol=1e-6 * np.abs(added).max())
+
+
+def test_a_belief_too_sure_of_itself_is_inflated_until_the_push_fits():
+    """A belief 3 prior std from the truth and a thousand times surer than the prior: the push
+    cannot be fitted from it, and the update is the Kalman update from the belief inflated by
+    the first factor that fits."""
+    a, b, mean, cov, track, scene = problem(7)
+    y = np.column_stack([track.force, track.pose])
+    pool = LinearPool(a, b)
+    truth_mean = kalman(a, b, mean, cov, y)[0]
+    sure = 1e-6 * cov
+    wrong = truth_mean + 3 * np.sqrt(np.diag(cov))
+    cfg = EXACT.model_copy(update={"poor_fit_chi2": 2.0, "inflation": (10.0, 1e4, 1e6)})
+    up = iterated_update(wrong, sure, track, scene, pool, SIGMAS, cfg)
+    assert up.inflation > 1.0 and not up.poor_fit
+    want_mean, want_cov = kalman(a, b, wrong, up.inflation * sure, y)
+    np.testing.assert_allclose(up.mean, want_mean, atol=1e-6 * np.sqrt(np.diag(cov)).max())
+    np.testing.assert_allclose(up.cov, want_cov, rtol=1e-5, atol=1e-14)
+    stuck = iterated_update(wrong, sure, track, scene, pool, SIGMAS, EXACT.model_copy(
+        update={"poor_fit_chi2": 2.0}))  # fmt: skip
+    assert stuck.poor_fit and stuck.inflation == 1.0
+
+
+def test_misfit_noise_widens_the_posterior_where_the_replay_misses():
+    a, b, mean, cov, track, scene = problem(5)
+    bad = PushTrack(track.push, track.start, track.pose0, track.force + 0.3, track.pose)
+    pool = LinearPool(a, b)
+    tight = iterated_update(mean, cov, bad, scene, pool, SIGMAS, EXACT)
+    honest = iterated_update(
+        mean, cov, bad, scene, pool, SIGMAS, EXACT.model_copy(update={"misfit_noise": True})
+    )
+    assert honest.noise_scale[0] > 2.0
+    assert np.trace(honest.cov) > np.trace(tight.cov)
+
+
+def test_expected_information_is_the_gaussian_entropy_reduction():
+    a, b, mean, cov, track, scene = problem(6)
+    got = expected_information(mean, cov, [track], scene, LinearPool(a, b), SIGMAS, EXACT)
+    rows = np.arange(5, T * 5)
+    ar = a[rows] / np.tile(SIGMAS, T)[rows][:, None]
+    chol = np.linalg.cholesky(cov)
+    want = 0.5 * np.linalg.slogdet(np.eye(5) + chol.T @ ar.T @ ar @ chol)[1]
+    assert got[0] == pytest.approx(want, rel=1e-6)
+    quasi = PushTrack(Push((0.0, -0.1), np.pi / 2, "constant", 0.02), *[track.start,
+                      track.pose0, track.force, track.pose])  # fmt: skip
+    assert (
+        expected_information(mean, cov, [quasi], scene, LinearPool(a, b), SIGMAS, EXACT)[0] < got[0]
+    )

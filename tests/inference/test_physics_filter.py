@@ -1,0 +1,89 @@
+"""The physics filter (`inference.physics_filter`): its outline, its footprint prior, and one
+push on the testbed with the shipped model's perception."""
+
+import json
+
+import numpy as np
+import pytest
+
+from pushtoknow.common.params import denormalise_params
+from pushtoknow.identification.prior import footprint_prior, polygon_moments, prior_moments
+from pushtoknow.inference import InferenceConfig, infer_simulated, make_estimator
+from pushtoknow.inference.physics_filter import PhysicsFilterEstimator, outline_shape
+from pushtoknow.models.checkpoint import load_checkpoint
+from pushtoknow.pretrained import resolve_model_path
+from pushtoknow.testbed.object_refs import load_object_spec
+from pushtoknow.testbed.shapes import footprint_from_shape
+
+
+def test_the_traced_outline_becomes_a_polygon_the_testbed_accepts():
+    t = np.linspace(0, 2 * np.pi, 60, endpoint=False)
+    traced = np.column_stack([0.05 * np.cos(t) + 0.003, 0.03 * np.sin(t) - 0.002])  # off-centre
+    shape, offset = outline_shape(traced[::-1])  # clockwise, as a mask tracer may give it
+    np.testing.assert_allclose(offset, [0.003, -0.002], atol=2e-5)  # the replay's frame offset
+    fp = footprint_from_shape(shape)
+    np.testing.assert_allclose(fp.polygon.centroid.coords[0], 0.0, atol=1e-9)
+    assert fp.polygon.exterior.is_ccw
+    assert fp.polygon.area == pytest.approx(np.pi * 0.05 * 0.03, rel=0.01)
+
+
+def test_polygon_moments_are_the_uniform_distributions():
+    c, cov = polygon_moments(np.array([[0.0, 0.0], [0.2, 0.0], [0.2, 0.1], [0.0, 0.1]]))
+    np.testing.assert_allclose(c, [0.1, 0.05])
+    np.testing.assert_allclose(cov, np.diag([0.2**2 / 12, 0.1**2 / 12]), atol=1e-15)
+    tri = np.array([[0.0, 0.0], [0.3, 0.0], [0.0, 0.3]])  # right triangle: E[x] = a/3
+    c, cov = polygon_moments(tri)
+    np.testing.assert_allclose(c, [0.1, 0.1])
+    np.testing.assert_allclose(cov, [[0.3**2 / 18, -(0.3**2) / 36], [-(0.3**2) / 36, 0.3**2 / 18]])
+
+
+def test_the_footprint_prior_puts_the_com_in_the_hull_and_i_z_about_the_plates():
+    region = np.array([[-0.08, -0.03], [0.1, -0.03], [0.1, 0.03], [-0.08, 0.03]])
+    mean, cov = footprint_prior(region, gyration_radius=0.05)
+    base_mean, base_cov = prior_moments()
+    phi = denormalise_params(mean)
+    assert phi[2] == pytest.approx(0.01) and phi[3] == pytest.approx(0.0, abs=1e-12)
+    np.testing.assert_allclose(mean[:2], base_mean[:2])  # m and μ as before
+    np.testing.assert_allclose(cov[:2, :2], base_cov[:2, :2])
+    # I_z's median is the median mass times k², correlated with m through log I_z = log m + …
+    assert phi[4] == pytest.approx(phi[0] * 0.05**2, rel=1e-9)
+    assert cov[4, 0] > 0 and np.all(np.linalg.eigvalsh(cov) > 0)
+
+
+@pytest.fixture(scope="module")
+def model():
+    return load_checkpoint(resolve_model_path("pretrained"))
+
+
+def test_the_estimator_is_chosen_by_name(model):
+    est = make_estimator(model, InferenceConfig(estimator="physics"))
+    assert isinstance(est, PhysicsFilterEstimator) and est.name == "physics"
+    est.close()
+
+
+@pytest.mark.slow
+def test_one_constant_push_reveals_mu_m_and_the_com_not_the_mass(model):
+    """A quasi-static push on held-out rect2: μ·m and the CoM from the replay of VisNet's
+    pose track and the force; no information on m at fixed μ·m nor on I_z. Same seed, same
+    JSON."""
+    spec = load_object_spec("catalogue:117")
+    cfg = InferenceConfig(pushes=1, estimator="physics", candidates=4)
+    est = PhysicsFilterEstimator(model, cfg)
+    try:
+        res = infer_simulated(model, spec, cfg, seed=0, estimator=est)
+    finally:
+        est.close()
+    (e,) = res.estimates
+    truth = spec.params.as_array()
+    assert res.estimator == "physics" and res.poses[0].shape == (len(res.records[0].time), 3)
+    assert e.mean[0] * e.mean[1] == pytest.approx(truth[0] * truth[1], rel=0.15)
+    assert np.all(np.abs(e.zscore(truth)[2:4]) < 3.0)
+    assert np.all(np.abs(e.mean[2:4] - truth[2:4]) < 0.004)
+    (up,) = est.updates
+    if up.inflation == 1.0:  # the push's information: none on log m at fixed μ·m, log I_z
+        added = np.linalg.inv(est.cov) - np.linalg.inv(est.prior_cov)
+        np.testing.assert_allclose(added[[1, 4]], 0.0, atol=1e-6 * np.abs(added).max())
+    lo, hi = e.interval()
+    assert np.all((lo <= e.mean) & (e.mean <= hi))
+    again = infer_simulated(model, spec, cfg, seed=0)
+    assert json.dumps(again.to_json()) == json.dumps(res.to_json())
