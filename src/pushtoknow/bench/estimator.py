@@ -24,7 +24,8 @@ import torch
 from scipy.stats import norm
 
 from pushtoknow.bench import machine_description
-from pushtoknow.common.params import PARAM_NAMES, PARAM_RANGES
+from pushtoknow.common.params import PARAM_NAMES
+from pushtoknow.evaluation.metrics import coverage, param_ranges
 
 Z90 = float(norm.ppf(0.95))  # two-sided 90% quantile of the standard normal, 1.645
 DEFAULT_OBJECTS_SEED = 2026
@@ -107,10 +108,11 @@ def summarise(rows: Sequence[ObjectRow]) -> EstimatorSummary:
         p: float(np.mean([r.error_norm[p] for r in rows])) if rows else float("nan")
         for p in PARAM_NAMES
     }
-    coverage = {
-        p: float(np.mean([abs(r.zscore[p]) <= Z90 for r in rows])) if rows else float("nan")
-        for p in PARAM_NAMES
-    }
+    if rows:
+        z = np.array([[r.zscore[p] for p in PARAM_NAMES] for r in rows])
+        covered = {p: coverage(z, 0.9)[p] for p in PARAM_NAMES}
+    else:
+        covered = dict.fromkeys(PARAM_NAMES, float("nan"))
     outside = sum(not r.mean_inside_interval[p] for r in rows for p in PARAM_NAMES)
     return EstimatorSummary(
         objects=len(rows),
@@ -120,7 +122,7 @@ def summarise(rows: Sequence[ObjectRow]) -> EstimatorSummary:
         object_s_median=_median([r.object_s for r in rows]),
         error_norm_mean=error_mean,
         error_norm_overall=float(np.mean(list(error_mean.values()))),
-        coverage90=coverage,
+        coverage90=covered,
         means_outside_interval=int(outside),
     )
 
@@ -130,8 +132,7 @@ def object_row(ref: str, result, object_s: float) -> ObjectRow:
     is judged)."""
     final = result.estimates[-1]
     truth = np.asarray(result.truth, dtype=np.float64)
-    width = np.array([PARAM_RANGES[p][1] - PARAM_RANGES[p][0] for p in PARAM_NAMES])
-    error = np.abs(np.asarray(final.mean) - truth) / width
+    error = np.abs(np.asarray(final.mean) - truth) / param_ranges()
     z = np.asarray(final.zscore(truth))
     lo, hi = final.interval()
     inside = (np.asarray(lo) <= final.mean) & (final.mean <= np.asarray(hi))

@@ -59,7 +59,7 @@ from pushtoknow.identification.replay import (
 from pushtoknow.identification.residuals import ReplayResiduals, huber_cost, huber_weights
 from pushtoknow.testbed.config import SimConfig, check_testbed_version
 from pushtoknow.testbed.objects import COM_MARGIN
-from pushtoknow.testbed.push import pad_positions
+from pushtoknow.testbed.push import Push, pad_positions
 from pushtoknow.testbed.sim import PushRecord
 
 TRACK_TOLERANCE = 1e-3  # m: a recorded pad track may depart this far from its commanded profile
@@ -250,6 +250,20 @@ def closed_form_start(records: Sequence[PushRecord], sim_config: SimConfig) -> d
     return {"mu_m": mu_m, "mass": mass, "friction": friction}
 
 
+def is_quasi_static(push: Push) -> bool:
+    """Whether a push is quasi-static: constant, at most `QUASI_STATIC_SPEED`."""
+    return push.profile == "constant" and push.speed <= QUASI_STATIC_SPEED
+
+
+def without_blind(h_data: np.ndarray) -> np.ndarray:
+    """The data information (D, D), fit coordinates first, less what quasi-static pushing
+    cannot reveal (`QUASI_STATIC_BLIND`: m at fixed μ·m and I_z, docs/DESIGN.md §10)."""
+    h = h_data.copy()
+    h[QUASI_STATIC_BLIND, :] = 0.0
+    h[:, QUASI_STATIC_BLIND] = 0.0
+    return h
+
+
 def _describe(direction_z: np.ndarray) -> str:
     """A unit direction over the normalised parameters as text, e.g. "+1.00 inertia"."""
     d = direction_z / np.linalg.norm(direction_z)
@@ -333,9 +347,7 @@ def identify(
     t0 = time.perf_counter()
     check_testbed_version(scene.sim_config, "the pushes")
     tracks = tracks_from_records(records, scene.sim_config)
-    quasi_static = cfg.quasi_static_rule and all(
-        t.push.profile == "constant" and t.push.speed <= QUASI_STATIC_SPEED for t in tracks
-    )
+    quasi_static = cfg.quasi_static_rule and all(is_quasi_static(t.push) for t in tracks)
     footprint = scene.footprint
     recorded_noise = scene.sim_config.tactile.force_noise_std
     noise_unknown = cfg.force_noise is None and recorded_noise == 0.0
@@ -513,8 +525,7 @@ def identify(
             # within the start pose's noise, so it is dropped and those stay at the prior's
             # width. A poor fit's m and I_z (read from accelerations and spin-downs it does
             # not reproduce) are as far off as its misfit allows, so they keep it too.
-            h_data[QUASI_STATIC_BLIND, :] = 0.0
-            h_data[:, QUASI_STATIC_BLIND] = 0.0
+            h_data = without_blind(h_data)
         cov_u, lam_d, vecs, flat = laplace_posterior(
             h_data, newton, p_u, cfg.flat_information, cfg.information_scale
         )

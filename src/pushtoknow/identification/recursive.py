@@ -32,10 +32,10 @@ from pydantic import Field
 
 from pushtoknow.common.config import Config
 from pushtoknow.identification.fit import (
-    QUASI_STATIC_BLIND,
-    QUASI_STATIC_SPEED,
+    is_quasi_static,
     laplace_posterior,
     misfit_noise_scale,
+    without_blind,
 )
 from pushtoknow.identification.replay import PushTrack, ReplayScene, RolloutPool
 from pushtoknow.identification.residuals import (
@@ -256,8 +256,11 @@ def _update_once(
                 break
         return u, r, c, jac, step
 
+    def reduced_chi2(r: np.ndarray, params: int) -> float:
+        return float(np.sum(r[:n] ** 2) / max(n - params, 1))
+
     u, r, c, jac, step = descend(u, r, c)
-    if float(np.sum(r[:n] ** 2) / max(n - 5, 1)) > cfg.poor_fit_chi2 and cfg.coarse_pose_factor > 1:
+    if reduced_chi2(r, 5) > cfg.poor_fit_chi2 and cfg.coarse_pose_factor > 1:
         # stuck where the pose misfit's landscape is rough (a CoM far from the start): descend
         # once with the pose track weighted as if `coarse_pose_factor` times noisier (led by
         # the force), then again under the true weights; kept if the objective is lower
@@ -270,7 +273,7 @@ def _update_once(
         if fit[2] < c:
             u, r, c, jac, step = fit
 
-    chi2 = float(np.sum(r[:n] ** 2) / max(n - dim, 1))
+    chi2 = reduced_chi2(r, dim)
     raised = np.ones(5)
     if cfg.misfit_noise:
         raised = np.maximum(misfit_noise_scale(r[:n].reshape(-1, 5), res.push_lengths), 1.0)
@@ -279,14 +282,12 @@ def _update_once(
     jac_w = jac * row_scale[:, None]
     w = np.concatenate([huber_weights(r_w[:n], cfg.huber, res.robust), np.ones(len(r) - n)])
     h_data = jac_w[:n].T @ (w[:n, None] * jac_w[:n])
-    quasi_static = track.push.profile == "constant" and track.push.speed <= QUASI_STATIC_SPEED
     poor = chi2 > cfg.poor_fit_chi2
-    if quasi_static or poor:
+    if is_quasi_static(track.push) or poor:
         # a quasi-static push reveals neither m at fixed μ·m nor I_z (docs/DESIGN.md §10); a
         # push the replay cannot reproduce reads them off accelerations and spin-downs it
         # does not match
-        h_data[QUASI_STATIC_BLIND, :] = 0.0
-        h_data[:, QUASI_STATIC_BLIND] = 0.0
+        h_data = without_blind(h_data)
     post, lam_d, vecs, flat = laplace_posterior(
         h_data, step, cov, cfg.flat_information, cfg.information_scale
     )
@@ -332,9 +333,8 @@ def expected_information(
         sims = np.stack(res.simulate(probes)) / res.sigmas  # (6, N, 5)
         jac = ((sims[1:] - sims[0][None]) / fd[:, None, None]).reshape(5, -1).T
         h = jac.T @ jac
-        if track.push.profile == "constant" and track.push.speed <= QUASI_STATIC_SPEED:
-            h[QUASI_STATIC_BLIND, :] = 0.0
-            h[:, QUASI_STATIC_BLIND] = 0.0
+        if is_quasi_static(track.push):
+            h = without_blind(h)
         white = chol.T @ h @ chol
         sign, logdet = np.linalg.slogdet(np.eye(5) + 0.5 * (white + white.T))
         out.append(0.5 * logdet if sign > 0 else 0.0)

@@ -51,7 +51,7 @@ from pushtoknow.inference.estimator import (
 )
 from pushtoknow.models.checkpoint import TrainedModel
 from pushtoknow.perception.footprint import object_top, replay_outline
-from pushtoknow.perception.visnet import frames_as_tensors, start_pose, visnet_measure
+from pushtoknow.perception.visnet import start_pose, visnet_poses
 from pushtoknow.testbed.config import SimConfig
 from pushtoknow.testbed.executor import View
 from pushtoknow.testbed.objects import COM_MARGIN, MIN_HEIGHT
@@ -97,10 +97,12 @@ class PhysicsFilterEstimator(Estimator):
         self.sim_config = (sim_config or model.sim_config).model_copy(update={"render": False})
         self.camera = model.camera
         self.tmat = fit_transform()
+        self.t_inv = np.linalg.inv(self.tmat)
         z, p_z = prior_moments()
         self.mean = self.tmat @ z
         self.cov = self.prior_cov = self.tmat @ p_z @ self.tmat.T
         self.scene: ReplayScene | None = None
+        self.com_region: np.ndarray | None = None  # (V, 2) where the CoM can lie, scene frame
         self.updates: list[PhysicsUpdate] = []
         self._pool: RolloutPool | None = None
         self._prev: tuple[np.ndarray, np.ndarray] | None = None  # (S_0, pose0) of last push
@@ -126,9 +128,8 @@ class PhysicsFilterEstimator(Estimator):
     def belief_norm(self) -> tuple[np.ndarray, np.ndarray]:
         """The belief over the normalised parameters, the CoM in the object frame: mean (5,),
         cov (5, 5). (The filter's own CoM is in the replayed outline's centroid frame.)"""
-        t_inv = np.linalg.inv(self.tmat)
-        cov = t_inv @ self.cov @ t_inv.T
-        mean = t_inv @ self.mean
+        cov = self.t_inv @ self.cov @ self.t_inv.T
+        mean = self.t_inv @ self.mean
         if self.scene is not None:
             mean[2:4] += np.asarray(self.scene.frame_offset) / space_scale()[2:4]
         return mean, 0.5 * (cov + cov.T)
@@ -144,8 +145,7 @@ class PhysicsFilterEstimator(Estimator):
             cov[4, 4] += (cfg.inertia_floor / scale[4]) ** 2
         region = None
         if self.scene is not None:
-            region = com_region(self.scene.footprint.vertices, COM_MARGIN)
-            region = region + np.asarray(self.scene.frame_offset)
+            region = self.com_region + np.asarray(self.scene.frame_offset)
         return belief_to_estimate(index, mean, cov, push, region)
 
     def _scene(self, view: View, pose0: np.ndarray) -> ReplayScene:
@@ -156,17 +156,16 @@ class PhysicsFilterEstimator(Estimator):
             height = max(object_top(view.depth, view.s0, self.camera), MIN_HEIGHT)
             shape, offset = outline_shape(fp)
             self.scene = ReplayScene(shape, height, self.sim_config, offset)
+            self.com_region = com_region(self.scene.footprint.vertices, COM_MARGIN)
         return self.scene
 
     def _prior_from_footprint(self, scene: ReplayScene) -> None:
         """The prior once the footprint is seen (`prior.footprint_prior`): the CoM anywhere
         in its convex hull, I_z about the uniform plate's."""
-        footprint = scene.footprint
-        region = footprint.com_region(COM_MARGIN)
+        region = scene.footprint.com_region(COM_MARGIN)
         if region.is_empty or region.geom_type != "Polygon":
-            return
-        poly = footprint.polygon
-        _, plate = polygon_moments(np.asarray(poly.exterior.coords)[:-1])
+            return  # too thin for the margin: the catalogue prior stays
+        _, plate = polygon_moments(scene.footprint.vertices)
         z, p_z = footprint_prior(
             np.asarray(region.exterior.coords)[:-1], float(np.sqrt(np.trace(plate)))
         )
@@ -178,24 +177,14 @@ class PhysicsFilterEstimator(Estimator):
         previous = None if self._prev is None else (*self._prev, self._last_pose)
         return start_pose(self.model.visnet, self.camera, view, initial_pose, previous)
 
-    def _measure(self, rgb, depth, s0, pose0, ref) -> np.ndarray:
-        """VisNet's poses (N, 3) of frames rgb (N, H, W, 3), depth (N, H, W) against S_0 at
-        pose0, about reference poses ref (N, 3) or (3,)."""
-        frames = frames_as_tensors(rgb, depth, self.camera)
-        n = len(frames)
-        mask0 = torch.as_tensor(s0, dtype=torch.float32)[None, None].expand(n, -1, -1, -1)
-        p0 = torch.as_tensor(pose0, dtype=torch.float32)[None].expand(n, -1)
-        r = torch.as_tensor(np.broadcast_to(ref, (n, 3)).copy(), dtype=torch.float32)
-        return visnet_measure(self.model.visnet, frames, mask0, p0, r, self.camera).double().numpy()
-
     @torch.no_grad()
     def pose_track(self, record: PushRecord, view: View, pose0: np.ndarray) -> np.ndarray:
         """(T, 3) the push's pose track seen by VisNet: frame t measured about frame t − 1's
         measurement (pose0 at t = 0)."""
         track = [np.asarray(pose0, dtype=np.float64)]
         for t in range(1, len(record.time)):
-            z = self._measure(record.rgb[t : t + 1], record.depth[t : t + 1], view.s0, pose0,
-                              track[-1])  # fmt: skip
+            frame = (record.rgb[t : t + 1], record.depth[t : t + 1])
+            z = visnet_poses(self.model.visnet, self.camera, *frame, view.s0, pose0, track[-1])
             track.append(z[0])
         return np.stack(track)
 
@@ -247,9 +236,7 @@ class PhysicsFilterEstimator(Estimator):
         cf = closed_form_start([record], self.sim_config)
         if cf["mu_m"] is None:
             return []
-        t_inv = np.linalg.inv(self.tmat)
-        z = t_inv @ self.mean
-        phi = denormalise_params(z)
+        phi = denormalise_params(self.t_inv @ self.mean)
         mass = cf["mass"] if cf["mass"] is not None else phi[0]
         phi[0], phi[1] = mass, cf["mu_m"] / mass
         z_cf = normalise_params(phi)
@@ -274,11 +261,9 @@ class PhysicsFilterEstimator(Estimator):
         )
         look = dataclasses.replace(scene, sim_config=sim)
         k = min(len(candidates), self.filter_config.look_ahead_candidates)
-        tracks = []
-        for p in candidates[:k]:
-            samples = int(round(horizon * sim.tactile.rate_hz)) + 1
-            zeros = np.zeros((samples, 2))
-            tracks.append(PushTrack(p, None, np.asarray(pose0), zeros, np.zeros((samples, 3))))
+        samples = int(round(horizon * sim.tactile.rate_hz)) + 1
+        force, pose = np.zeros((samples, 2)), np.zeros((samples, 3))  # unused by the scores
+        tracks = [PushTrack(p, None, np.asarray(pose0), force, pose) for p in candidates[:k]]
         scores = expected_information(
             self.mean, self.cov, tracks, look, self.pool, self.sigmas, self.filter_config
         )

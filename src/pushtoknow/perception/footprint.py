@@ -86,10 +86,15 @@ def footprint_from_mask(
     else:
         c = mask_contour(mask, camera, z, smoothing=OUTLINE_SMOOTHING)
         pts = decimate(c.points if len(c.points) >= n else resample(c.points, n), n)
-    res = pts - c.centroid
+    return to_object_frame(pts, c.centroid, pose0)
+
+
+def to_object_frame(points: np.ndarray, centroid: np.ndarray, pose0) -> np.ndarray:
+    """World points (N, 2) on the traced plane → the object frame of pose0 (x, y, θ) whose
+    origin is the traced contour's `centroid` (2,): translated to it and rotated by −θ0."""
     th = -float(pose0[2])
-    R = np.array([[math.cos(th), -math.sin(th)], [math.sin(th), math.cos(th)]])
-    return res @ R.T
+    rot = np.array([[math.cos(th), -math.sin(th)], [math.sin(th), math.cos(th)]])
+    return (np.asarray(points) - centroid) @ rot.T
 
 
 def footprint_seen(
@@ -210,7 +215,4 @@ def replay_outline(
     contour's centroid."""
     mask = s0 if outline_mask is None else outline_mask
     c = mask_contour(mask, camera, object_top(depth, s0, camera), smoothing=REPLAY_SMOOTHING)
-    poly = sharpen_corners(c.points) - c.centroid
-    th = -float(pose0[2])
-    rot = np.array([[math.cos(th), -math.sin(th)], [math.sin(th), math.cos(th)]])
-    return poly @ rot.T
+    return to_object_frame(sharpen_corners(c.points), c.centroid, pose0)

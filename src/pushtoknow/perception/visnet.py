@@ -92,13 +92,16 @@ def start_pose(
     ref = np.array(last_pose, dtype=np.float64)
     if view.moved_by is not None:
         ref[:2] += np.asarray(view.moved_by)
-    rgbd = frames_as_tensors(view.rgb[None], view.depth[None], camera)
-    meas = visnet_measure(
-        net,
-        rgbd,
-        torch.as_tensor(s0_prev, dtype=torch.float32)[None, None],
-        torch.as_tensor(pose0_prev, dtype=torch.float32)[None],
-        torch.as_tensor(ref, dtype=torch.float32)[None],
-        camera,
-    )
-    return meas[0].double().numpy()
+    return visnet_poses(net, camera, view.rgb[None], view.depth[None], s0_prev, pose0_prev, ref)[0]
+
+
+@torch.no_grad()
+def visnet_poses(net: VisNet, camera: CameraModel, rgb, depth, s0, pose0, ref) -> np.ndarray:
+    """VisNet's poses (N, 3) (x, y, θ) of frames rgb (N, H, W, 3) uint8, depth (N, H, W) m,
+    against the mask S_0 (H, W) taken at pose0 (3,), about reference poses ref (N, 3) or (3,)."""
+    frames = frames_as_tensors(rgb, depth, camera)
+    n = len(frames)
+    mask0 = torch.as_tensor(s0, dtype=torch.float32)[None, None].expand(n, -1, -1, -1)
+    p0 = torch.as_tensor(pose0, dtype=torch.float32)[None].expand(n, -1)
+    r = torch.as_tensor(np.broadcast_to(ref, (n, 3)).copy(), dtype=torch.float32)
+    return visnet_measure(net, frames, mask0, p0, r, camera).double().numpy()
