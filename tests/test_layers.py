@@ -26,6 +26,7 @@ RANKS = {
     "evaluation": 8,
     "bench": 9,
     "viz": 9,
+    "api": 9.5,  # the Python API re-exported by `import pushtoknow`
     "cli": 10,
 }
 ROOT = Path(pushtoknow.__file__).parent

@@ -15,12 +15,13 @@ STRIP_FRAMES = 8
 
 def one_push(spec, profile: str = "constant", seed: int = 0):
     """Place the object at the workspace centre, push it once from a seeded affordance."""
+    from pushtoknow.common.random import stream, stream_seed
     from pushtoknow.geometry.affordances import sample_push_affordances
     from pushtoknow.testbed.executor import SimulatedExecutor
     from pushtoknow.testbed.push import Push
 
-    ex = SimulatedExecutor(spec, seed=seed, randomise_pose=False)
-    rng = np.random.default_rng(seed)
+    ex = SimulatedExecutor(spec, seed=stream_seed(seed, "simulator"), randomise_pose=False)
+    rng = stream(seed, "policy")
     view = ex.observe()
     cp, pd = sample_push_affordances(view.s0, ex.camera, 1, rng)
     cfg = ex.sim.config.push
@@ -31,9 +32,9 @@ def one_push(spec, profile: str = "constant", seed: int = 0):
     return rec, camera
 
 
-def save_push_strip(rec, camera, path: Path, title: str = "") -> None:
+def save_push_strip(rec, camera, path: Path, title: str = "", fmt: str | None = None) -> None:
     """A row of RGB frames (pad and true pose marked), the depth of the last frame, S_0, and the
-    tactile force over time."""
+    tactile force over time. fmt: the image format (None: from the suffix of `path`)."""
     T = len(rec.time)
     idx = np.linspace(0, T - 1, STRIP_FRAMES).round().astype(int)
     fig = plt.figure(figsize=(2 * STRIP_FRAMES, 5.2))
@@ -64,7 +65,7 @@ def save_push_strip(rec, camera, path: Path, title: str = "") -> None:
     ax.axis("off")
     fig.suptitle(title)
     fig.tight_layout()
-    fig.savefig(path, dpi=80)
+    fig.savefig(path, dpi=80, format=fmt)
     plt.close(fig)
 
 

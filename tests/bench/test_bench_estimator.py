@@ -29,6 +29,7 @@ def _row(i, update_s, object_s, errors, zscores, inside=None):
         error_norm=dict(zip(PARAM_NAMES, errors)),
         zscore=dict(zip(PARAM_NAMES, zscores)),
         mean_inside_interval=dict(zip(PARAM_NAMES, inside or [True] * 5)),
+        profiles_chosen=["constant"] * len(update_s),
     )
 
 
@@ -95,6 +96,7 @@ def test_tiny_run_through_the_cli(tmp_path):
     assert obj["ref"] == "random:2026:0" and obj["name"].startswith("random:2026:0:")
     assert len(obj["update_s"]) == 1 and obj["update_s"][0] > 0
     assert obj["object_s"] >= obj["update_s"][0]
+    assert len(obj["profiles_chosen"]) == 1 and obj["profiles_chosen"][0] in report["profiles"]
     for key in ("error_norm", "zscore", "mean_inside_interval"):
         assert set(obj[key]) == set(PARAM_NAMES), key
     s = report["summary"]

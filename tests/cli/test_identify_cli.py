@@ -43,6 +43,36 @@ def test_identify_prints_estimates_as_json(tmp_path):
     assert any("inertia" in d for d in obj["unidentified"])
 
 
+def test_identify_exports_the_identified_object_for_mujoco(tmp_path):
+    """--export mjcf PATH writes the identified object: MuJoCo loads it with the identified
+    mass and CoM; a bad kind or folder is refused before any work."""
+    import mujoco
+    import numpy as np
+
+    ds = write_tiny_dataset(tmp_path / "ds")
+    xml = tmp_path / "object.xml"
+    r = run(
+        "identify", "--pushes", str(ds), "--workers", "1", "--json", "--export", "mjcf", str(xml)
+    )
+    assert r.returncode == 0, r.stderr
+    (obj,) = json.loads(r.stdout)["objects"]
+    m = mujoco.MjModel.from_xml_path(str(xml))
+    body = m.nbody - 1
+    assert m.body_mass[body] == np.float64(obj["parameters"]["mass"]["mean"])
+    np.testing.assert_allclose(
+        m.body_ipos[body][:2],
+        [obj["parameters"]["com_x"]["mean"], obj["parameters"]["com_y"]["mean"]],
+        atol=1e-9,
+    )
+    _one_line_error(
+        run("identify", "--pushes", str(ds), "--export", "sdf", str(xml)), "--export", "sdf"
+    )
+    _one_line_error(
+        run("identify", "--pushes", str(ds), "--export", "urdf", str(tmp_path / "no" / "o.urdf")),
+        "folder does not exist",
+    )
+
+
 def test_bad_inputs_give_one_line_errors(tmp_path):
     empty = tmp_path / "empty"
     empty.mkdir()

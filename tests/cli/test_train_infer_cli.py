@@ -132,7 +132,7 @@ def test_infer_json(trained, tmp_path):
     out = tmp_path / "X"
     result = invoke(
         "infer", "--model", run, "--object", "catalogue:117", "--pushes", "1", "--json",
-        "--out", out,
+        "--out", out, "--estimator", "vt-addf",
     )  # fmt: skip
     assert result.exit_code == 0, (result.output, result.exception)
     report = json.loads(result.stdout)  # stdout is the JSON only (tables go to stderr)
@@ -151,17 +151,23 @@ def test_infer_json(trained, tmp_path):
 
     (kept,) = load_recorded_objects(out)
     assert len(kept.records) == 1 and kept.truth.tolist() == truth.as_array().tolist()
-    # the README's Python calls give the same result as the command
+    # the Python calls of docs/guide/infer-and-evaluate.md give the same result as the command
+    from pushtoknow.common.random import stream_seed
     from pushtoknow.inference import InferenceConfig, infer_object, infer_simulated
     from pushtoknow.models.checkpoint import load_checkpoint
     from pushtoknow.testbed.executor import SimulatedExecutor
 
     model = load_checkpoint(run)
     spec = load_object_spec("catalogue:117")
-    config = InferenceConfig(pushes=1, policy="uniform", profiles=model.profiles)
+    config = InferenceConfig(
+        estimator="vt-addf", pushes=1, policy="uniform", profiles=model.profiles
+    )
     res = infer_simulated(model, spec, config, seed=0)
     assert json.loads(json.dumps(res.to_json())) == report
-    executor = SimulatedExecutor(spec, model.sim_config, seed=0, recentre=True)
+    # the run's seed feeds the simulator its own stream (`common.random`)
+    executor = SimulatedExecutor(
+        spec, model.sim_config, seed=stream_seed(0, "simulator"), recentre=True
+    )
     res = infer_object(model, executor, config, seed=0, initial_pose=executor.initial_pose,
                        truth=spec.params.as_array(), object_name=spec.name)  # fmt: skip
     executor.close()
@@ -186,7 +192,7 @@ def test_infer_refuses_a_profile_the_model_never_saw(trained, tmp_path, monkeypa
     model.info["profiles"] = ["constant"]
     constant_only = save_checkpoint(model, tmp_path / "constant-only")
     args = ["infer", "--model", constant_only, "--object", "catalogue:117", "--pushes", "1"]
-    args += ["--profiles", "constant,release", "--out", tmp_path / "X"]
+    args += ["--profiles", "constant,release", "--out", tmp_path / "X", "--estimator", "vt-addf"]
     code, out, err = run_main(monkeypatch, capsys, *args)
     assert code == 2 and "after push" not in out + err  # refused before any push
     assert "profiles release" in err and "constant pushes only" in err

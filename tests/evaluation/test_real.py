@@ -240,6 +240,17 @@ def test_deterministic_given_seed(report, real_dir, run_dir, forest_dir):
     assert again.filter == report.filter and again.forest == report.forest
 
 
+def test_without_forest_data_the_filter_runs_and_no_forest_row_is_made(report, real_dir, run_dir):
+    """`--forest-data` is optional: without it the filter's rows are the same and the forest
+    and prior-mean rows are absent from the report and its tables."""
+    bare = estimate_real_object(real_dir, run_dir, None, seed=0, identify=False)
+    assert bare.filter == report.filter
+    assert bare.forest is None and bare.prior_mean is None and bare.forest_data is None
+    assert "forest" not in bare.errors and "forest" not in bare.mu_m["errors"]
+    md = markdown_table(bare, "rect1")
+    assert "forest" not in md and "prior mean" not in md and md.count("| filter, push") == 3
+
+
 def test_rescaled_pushes_are_labelled_at_training_speed(real_dir_rescaled, run_dir, forest_dir):
     r = estimate_real_object(
         real_dir_rescaled, run_dir, forest_dir, seed=0, forest_trees=TREES, identify=False

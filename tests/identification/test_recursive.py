@@ -33,6 +33,8 @@ EXACT = PhysicsFilterConfig(
     max_step=10.0,
     contact_offset_std=0.0,
     inflation=(),
+    rest_as_one=False,
+    pose_correlation=0.0,
 )
 START = np.array([0.0, -0.12])
 SIGMAS = np.array([0.05, 0.05, 5e-4, 5e-4, 0.01])
@@ -80,22 +82,31 @@ def problem(seed: int, profile: str = "release"):
     return a, b, mean, cov, track, scene
 
 
-def kalman(a, b, mean, cov, y):
-    """The exact posterior of u ~ N(mean, cov), y = A u + b + N(0, diag σ²), samples ≥ 1."""
+def kalman(a, b, mean, cov, y, rho: float = 0.0):
+    """The exact posterior of u ~ N(mean, cov), y = A u + b + e, samples ≥ 1; e Gaussian,
+    independent across channels, the force's white, each pose channel's AR(1) with lag-1
+    correlation rho (covariance σ² ρ^|i − j|)."""
     rows = np.arange(5, T * 5)  # the first sample is the start state: not a measurement
-    w = np.diag(1.0 / np.tile(SIGMAS, T)[rows] ** 2)
+    lag = np.abs(np.arange(T - 1)[:, None] - np.arange(T - 1)[None])
+    r = np.zeros((len(rows), len(rows)))
+    for c, sigma in enumerate(SIGMAS):
+        corr = rho**lag if c >= 2 else np.eye(T - 1)
+        r[c::5, c::5] = sigma**2 * corr
+    w = np.linalg.inv(r)
     ar, br, yr = a[rows], b[rows], y.reshape(-1)[rows]
     post = np.linalg.inv(np.linalg.inv(cov) + ar.T @ w @ ar)
     return post @ (np.linalg.solve(cov, mean) + ar.T @ w @ (yr - br)), post
 
 
 @settings(max_examples=15, deadline=None)
-@given(st.integers(0, 10_000))
-def test_the_iterated_update_is_the_kalman_update_on_a_linear_simulator(seed):
+@given(st.integers(0, 10_000), st.sampled_from([0.0, 0.7]))
+def test_the_iterated_update_is_the_kalman_update_on_a_linear_simulator(seed, rho):
+    """Exact against the Kalman update, with white and with AR(1) pose noise (whitened)."""
     a, b, mean, cov, track, scene = problem(seed)
-    up = iterated_update(mean, cov, track, scene, LinearPool(a, b), SIGMAS, EXACT)
+    cfg = EXACT.model_copy(update={"pose_correlation": rho})
+    up = iterated_update(mean, cov, track, scene, LinearPool(a, b), SIGMAS, cfg)
     y = np.column_stack([track.force, track.pose])
-    want_mean, want_cov = kalman(a, b, mean, cov, y)
+    want_mean, want_cov = kalman(a, b, mean, cov, y, rho)
     np.testing.assert_allclose(up.mean, want_mean, atol=1e-6 * np.sqrt(np.diag(cov)).max())
     np.testing.assert_allclose(up.cov, want_cov, rtol=1e-5, atol=1e-12)
     assert up.identified == 5 and not up.poor_fit

@@ -49,7 +49,9 @@ def infer(model, spec, policy="uniform", seed=0, pushes=PUSHES, profiles=("const
     ex = ViewRecorder(spec, SIM, seed=seed, recentre=True)
     try:
         ex.observe()  # as the CLI does: places the object, sets initial_pose
-        cfg = InferenceConfig(pushes=pushes, policy=policy, candidates=4, profiles=profiles)
+        cfg = InferenceConfig(
+            estimator="vt-addf", pushes=pushes, policy=policy, candidates=4, profiles=profiles
+        )
         seen = []
         result = infer_object(
             model,
@@ -152,7 +154,7 @@ def test_the_configured_policy_is_made_with_the_models_testbed_settings(model, s
     ex = SimulatedExecutor(spec, SIM, seed=0, recentre=True)
     try:
         ex.observe()
-        cfg = InferenceConfig(pushes=1, policy="active-entropy", candidates=3)
+        cfg = InferenceConfig(estimator="vt-addf", pushes=1, policy="active-entropy", candidates=3)
         res = infer_object(model, ex, cfg, 0, initial_pose=ex.initial_pose)
     finally:
         ex.close()
@@ -265,7 +267,7 @@ def test_profiles_the_model_never_saw_are_refused(model, spec):
     constant_only = dataclasses.replace(model, info={**model.info, "profiles": ["constant"]})
     ex = SimulatedExecutor(spec, SIM, seed=0, recentre=True)
     try:
-        cfg = InferenceConfig(pushes=1, profiles=("constant", "release"))
+        cfg = InferenceConfig(estimator="vt-addf", pushes=1, profiles=("constant", "release"))
         with pytest.raises(ValueError, match="profiles release: the model was trained on"):
             infer_object(constant_only, ex, cfg, 0, initial_pose=ex.initial_pose)
     finally:

@@ -68,7 +68,11 @@ def test_shipped_model_estimates_one_push():
     ex = SimulatedExecutor(spec, model.sim_config, seed=0, recentre=True)
     try:
         res = infer_object(
-            model, ex, InferenceConfig(pushes=1, num_sigma_points=30), 0, ex.initial_pose
+            model,
+            ex,
+            InferenceConfig(estimator="vt-addf", pushes=1, num_sigma_points=30),
+            0,
+            ex.initial_pose,
         )
     finally:
         ex.close()
@@ -84,17 +88,21 @@ def test_shipped_model_estimates_one_push():
 
 
 @pytest.mark.slow
-def test_the_learned_filter_behind_the_estimator_interface_gives_the_beliefs_it_gave_before():
+def test_the_learned_filter_gives_the_recorded_beliefs_bit_for_bit():
     """Same seed, same result: the shipped model's beliefs and chosen pushes on held-out rect2
-    (2 pushes, uniform and active-entropy) equal, bit for bit, those recorded before the
-    learned filter moved behind `inference.Estimator` (tests/inference/data)."""
+    (2 pushes, uniform and active-entropy) equal, bit for bit, those recorded in
+    tests/inference/data: a changed random draw, policy decision or filter step shows here."""
     golden = json.loads(
         (Path(__file__).parent / "data" / "learned_filter_catalogue117_seed0.json").read_text()
     )
     model = load_checkpoint(resolve_model_path("pretrained"))
     for policy, want in golden.items():
         cfg = InferenceConfig(
-            pushes=2, policy=policy, candidates=4, profiles=("constant", "release")
+            estimator="vt-addf",
+            pushes=2,
+            policy=policy,
+            candidates=4,
+            profiles=("constant", "release"),
         )
         res = infer_simulated(model, load_object_spec("catalogue:117"), cfg, seed=0)
         assert [e.push.as_array().tolist() for e in res.estimates] == want["pushes"]

@@ -43,3 +43,11 @@ def test_method_table_counts_estimates_outside_their_interval():
     assert header[col - 1] == "impossible"
     assert rows["filter"][col] == "3/12" and rows["filter"][col - 1] == "0/12"
     assert rows["old"][col] == "–"  # a run without intervals
+
+
+def test_a_report_names_no_folder_of_the_machine_that_made_it(tmp_path, monkeypatch):
+    from pushtoknow.reporting.results import shown_path
+
+    monkeypatch.chdir(tmp_path)
+    assert shown_path(str(tmp_path / "runs" / "model")) == "runs/model"
+    assert shown_path("/elsewhere/deep/pretrained/vt-addf") == "pretrained/vt-addf"

@@ -52,7 +52,11 @@ def test_physics_structured_model_trains_reloads_and_estimates(
     try:
         ex.observe()
         cfg = InferenceConfig(
-            pushes=2, policy="active-kl", candidates=4, profiles=("constant", "release")
+            estimator="vt-addf",
+            pushes=2,
+            policy="active-kl",
+            candidates=4,
+            profiles=("constant", "release"),
         )
         res = infer_object(
             model,

@@ -42,7 +42,8 @@ class ObjectRow:
     (`update_s`, s) and of the whole run (`object_s`, s), and the final estimate per parameter
     (PARAM_NAMES keys): |mean − truth| / (catalogue range) (`error_norm`), the z-score of the
     truth (`zscore`), and whether the mean lies inside its own 90% interval
-    (`mean_inside_interval`)."""
+    (`mean_inside_interval`); the speed profile of each executed push (`profiles_chosen`: what
+    an active policy picked)."""
 
     ref: str
     name: str
@@ -51,6 +52,7 @@ class ObjectRow:
     error_norm: dict[str, float]
     zscore: dict[str, float]
     mean_inside_interval: dict[str, bool]
+    profiles_chosen: list[str]
 
 
 @dataclass(frozen=True)
@@ -144,6 +146,7 @@ def object_row(ref: str, result, object_s: float) -> ObjectRow:
         error_norm={p: float(v) for p, v in zip(PARAM_NAMES, error, strict=True)},
         zscore={p: float(v) for p, v in zip(PARAM_NAMES, z, strict=True)},
         mean_inside_interval={p: bool(v) for p, v in zip(PARAM_NAMES, inside, strict=True)},
+        profiles_chosen=[r.push.profile for r in result.records],
     )
 
 

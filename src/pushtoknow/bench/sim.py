@@ -10,6 +10,7 @@ from pushtoknow.bench import machine_description, peak_rss_mb
 
 
 def run_sim_bench(pushes: int = 6, seed: int = 0, object_source: str = "catalogue:100") -> dict:
+    from pushtoknow.common.random import stream, stream_seed
     from pushtoknow.geometry.affordances import sample_push_affordances
     from pushtoknow.testbed.config import SimConfig
     from pushtoknow.testbed.executor import SimulatedExecutor
@@ -17,8 +18,10 @@ def run_sim_bench(pushes: int = 6, seed: int = 0, object_source: str = "catalogu
     from pushtoknow.testbed.push import Push
 
     cfg = SimConfig()
-    ex = SimulatedExecutor(load_object_spec(object_source), cfg, seed=seed)
-    rng = np.random.default_rng(seed)
+    ex = SimulatedExecutor(
+        load_object_spec(object_source), cfg, seed=stream_seed(seed, "simulator")
+    )
+    rng = stream(seed, "policy")
 
     def one_push():
         view = ex.observe()

@@ -92,7 +92,7 @@ def bench_active(
     as_json: bool = typer.Option(False, "--json"),
     seed: int = seed_option(),
     candidates: int = typer.Option(16, "--candidates", min=1),
-    sigma_points: int = sigma_points_option(100, "sigma points (≥ 10)"),
+    sigma_points: int = sigma_points_option(100, "default 100"),
 ):
     """One active push decision: M candidates, N = 50% of the horizon, C sigma points; prints
     decision_s_median per score (kl, entropy)."""

@@ -1,4 +1,5 @@
-"""`pushtoknow` commands: data (simulate, dataset info, import-mit, collect)."""
+"""`pushtoknow` commands: data (simulate, dataset info, import-mit, collect,
+convert-recording)."""
 
 from __future__ import annotations
 
@@ -6,11 +7,19 @@ import json
 from pathlib import Path
 
 import typer
+from rich.markup import escape
 from rich.table import Table
 
+from pushtoknow.cli.identify import (
+    BAG_CONFIG_HELP,
+    FORCE_TOPIC_HELP,
+    OBJECT_TOPIC_HELP,
+    PUSHER_TOPIC_HELP,
+)
 from pushtoknow.cli.options import (
     PolicyChoice,
     policy_option,
+    pushes_option,
     ray_option,
     seed_option,
     sigma_points_option,
@@ -31,7 +40,7 @@ from pushtoknow.common.errors import PushToKnowError
 def simulate(
     out: Path = typer.Option(..., "--out", help="output directory (resumed if it exists)"),
     objects: int = typer.Option(4, "--objects", min=1),
-    pushes: int = typer.Option(2, "--pushes", min=1, help="pushes per object"),
+    pushes: int = pushes_option(2),
     seed: int = seed_option(),
     workers: int = typer.Option(1, "--workers", min=1),
     ray: str = ray_option(),
@@ -85,17 +94,14 @@ def dataset_info_cmd(
     ),
 ):
     """Summarise a dataset directory."""
-    from pushtoknow.datasets.shards import dataset_info
+    from pushtoknow.datasets.shards import dataset_info, incompleteness
 
     try:
         info = dataset_info(root, verify=verify)
     except PushToKnowError as e:
         fail(e)
-    if info["complete"] is False:
-        err_console.print(
-            f"[bold yellow]incomplete:[/] {info['objects']} of {info['expected_objects']} objects "
-            "written (an interrupted run: the same command resumes it)"
-        )
+    if (note := incompleteness(info)) is not None:
+        err_console.print(f"[bold yellow]{escape(note)}[/]")
     if as_json:
         print(json.dumps(info))
         return
@@ -158,7 +164,7 @@ def collect(
     model: str = typer.Option(..., "--model", help="RUN directory, model.pt or 'pretrained'"),
     policy: PolicyChoice = policy_option(None, "push policy (required)"),
     objects: int = typer.Option(4, "--objects", min=1),
-    pushes: int = typer.Option(2, "--pushes", min=1, help="pushes per object"),
+    pushes: int = pushes_option(2),
     seed: int = seed_option(),
     out: Path = typer.Option(..., "--out", help="output directory (resumed if it exists)"),
     objects_from: str = typer.Option(
@@ -205,3 +211,32 @@ def collect(
         f"wrote {res['shards_written']} shards, skipped {res['shards_skipped']} finished ones "
         f"({res['objects']} objects × {pushes} pushes, {policy.value}) → {out}"
     )
+
+
+@app.command("convert-recording")
+def convert_recording_cmd(
+    src: Path = typer.Argument(..., help="a ROS 2 bag folder or an .mcap / .db3 file"),
+    out: Path = typer.Option(..., "--out", help="the recording file to write (.h5)"),
+    pusher_topic: str = typer.Option(None, "--pusher-topic", help=PUSHER_TOPIC_HELP),
+    object_topic: str = typer.Option(None, "--object-topic", help=OBJECT_TOPIC_HELP),
+    force_topic: str = typer.Option(None, "--force-topic", help=FORCE_TOPIC_HELP),
+    bag_config: Path = typer.Option(None, "--bag-config", help=BAG_CONFIG_HELP),
+):
+    """Convert a ROS 2 bag or MCAP file into a recording file (docs/RECORDING.md), checked
+    as `identify` reads it."""
+    from pushtoknow.cli.identify import bag_options
+    from pushtoknow.common.errors import DatasetError
+    from pushtoknow.datasets.mcap_reader import BagOptions, is_bag, read_bag
+    from pushtoknow.datasets.recording import write_recording
+
+    try:
+        if not is_bag(src):
+            raise DatasetError(src, "not a ROS 2 bag folder (metadata.yaml) or .mcap/.db3 file")
+        opts = bag_options(bag_config, pusher_topic, object_topic, force_topic) or BagOptions()
+        meta, records = read_bag(src, opts)
+        write_recording(out, records, meta)
+    except PushToKnowError as e:
+        fail(e)
+    for note in meta.notes:
+        err_console.print(f"note: {note}")
+    console.print(f"wrote {len(records)} pushes of {meta.name} at {meta.rate:g} Hz → {out}")

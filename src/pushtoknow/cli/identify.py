@@ -9,6 +9,8 @@ import typer
 from rich.table import Table
 
 from pushtoknow.cli.options import (
+    checked_export,
+    export_option,
     ray_option,
     seed_option,
 )
@@ -53,14 +55,41 @@ def _identification_table(name: str, res, truth) -> Table:
     return t
 
 
+PUSHER_TOPIC_HELP = "bag: the pad's PoseStamped or PointStamped topic (/pusher/pose)"
+OBJECT_TOPIC_HELP = "bag: the object's PoseStamped topic (/object/pose)"
+FORCE_TOPIC_HELP = "bag: the pad's WrenchStamped topic (/pusher/wrench)"
+BAG_CONFIG_HELP = "bag: YAML of topics, frame, split and the object (docs/RECORDING.md)"
+
+
+def bag_options(config: Path | None, pusher: str | None, obj: str | None, force: str | None):
+    """The bag mapping (`BagOptions`) of the topic options and --bag-config (None when none
+    is given). Raises ConfigError naming the file."""
+    from pushtoknow.common.errors import ConfigError
+    from pushtoknow.datasets.mcap_reader import BagOptions
+
+    topics = {"pusher_topic": pusher, "object_topic": obj, "force_topic": force}
+    given = {k: v for k, v in topics.items() if v is not None}
+    if config is None and not given:
+        return None
+    if config is not None and not Path(config).is_file():
+        raise ConfigError(config, "--bag-config: no such file")
+    base = BagOptions.from_yaml(config) if config is not None else BagOptions()
+    return base.model_copy(update=given)
+
+
 @app.command("identify")
 def identify_cmd(
     pushes: Path = typer.Option(
         ...,
         "--pushes",
-        help="dataset directory (shard-*.h5), one shard file, or an `infer`/`demo` --out "
-        "RUN (the pushes it executed)",
+        help="dataset directory (shard-*.h5), one shard file, an `infer`/`demo` --out RUN "
+        "(the pushes it executed), a recording file (docs/RECORDING.md) or a ROS 2 bag / "
+        ".mcap file",
     ),
+    pusher_topic: str = typer.Option(None, "--pusher-topic", help=PUSHER_TOPIC_HELP),
+    object_topic: str = typer.Option(None, "--object-topic", help=OBJECT_TOPIC_HELP),
+    force_topic: str = typer.Option(None, "--force-topic", help=FORCE_TOPIC_HELP),
+    bag_config: Path = typer.Option(None, "--bag-config", help=BAG_CONFIG_HELP),
     shape: str = typer.Option("dataset", "--shape", help=IDENTIFY_SHAPE_HELP),
     object_index: int = typer.Option(
         None, "--object", help="index of the object in the dataset (default: every object)"
@@ -71,6 +100,7 @@ def identify_cmd(
     ray: str = ray_option(),
     config: Path = typer.Option(None, "--config", help="IdentifyConfig YAML"),
     as_json: bool = typer.Option(False, "--json", help="print the estimates as JSON"),
+    export: tuple[str, Path] | None = export_option(),
 ):
     """Identify m, μ, CoM and I_z from recorded pushes by replaying them in MuJoCo (the
     testbed's own scene with the footprint and candidate parameters) and fitting the tactile
@@ -78,6 +108,7 @@ def identify_cmd(
     the directions the pushes do not reveal reported and kept at the prior's width."""
     from rich.progress import Progress
 
+    from pushtoknow.api import export_identification
     from pushtoknow.common.parallel import make_runner
     from pushtoknow.identification.config import IdentifyConfig
     from pushtoknow.identification.fit import identify
@@ -85,13 +116,20 @@ def identify_cmd(
     from pushtoknow.identification.replay import RolloutPool
 
     try:
+        target = checked_export(export)
         cfg = IdentifyConfig.from_yaml(config) if config else IdentifyConfig()
         cfg = cfg.model_copy(update={"workers": workers})
-        objects = load_recorded_objects(pushes)
+        objects = load_recorded_objects(
+            pushes, bag_options(bag_config, pusher_topic, object_topic, force_topic)
+        )
         if object_index is not None:
             objects = [o for o in objects if o.index == object_index]
             if not objects:
                 raise IdentificationError(f"--object {object_index}: no such object in {pushes}")
+        if target is not None and len(objects) != 1:
+            raise IdentificationError(
+                f"--export: {pushes} holds {len(objects)} objects; choose one with --object"
+            )
         results = []
         with (
             make_runner(cfg.workers, ray) as runner,
@@ -105,6 +143,9 @@ def identify_cmd(
                 res = identify(records, scene, cfg, seed, lambda n, t=task: bar.advance(t, n), pool)
                 bar.update(task, total=res.rollouts, completed=res.rollouts)
                 results.append((obj, res))
+        if target is not None:
+            obj, res = results[0]
+            written = export_identification(res, scene, obj.name, *target)
     except PushToKnowError as e:
         fail(e)
     payload = {
@@ -115,16 +156,23 @@ def identify_cmd(
             {
                 "name": obj.name,
                 "index": obj.index,
-                "truth": None if obj.truth is None else obj.truth.tolist(),
+                "truth": None
+                if obj.truth is None
+                else [float(v) if v == v else None for v in obj.truth],
+                "recording_notes": list(obj.notes),
                 **res.as_dict(),
             }
             for obj, res in results
         ],
     }
+    if target is not None:
+        err_console.print(f"exported ({target[0]}) → {', '.join(map(str, written))}")
     if as_json:
         print(json.dumps(payload))
         return
     for obj, res in results:
+        for note in obj.notes:
+            err_console.print(f"{obj.name}: {note}")
         console.print(_identification_table(obj.name, res, obj.truth))
         console.print(
             f"not identified (prior width kept): {', '.join(res.unidentified) or 'none'}; "

@@ -4,14 +4,22 @@ identify, real data, bench); this module registers them and turns user errors in
 
 from __future__ import annotations
 
+import errno
 import sys
 
 import typer
 
-from pushtoknow.cli import bench, data, evaluation, identify, models  # noqa: F401 (commands)
+from pushtoknow.cli import (  # noqa: F401 (commands)
+    bench,
+    data,
+    evaluation,
+    identify,
+    models,
+    real_benchmark,
+)
 from pushtoknow.cli.real import register as _register_real
-from pushtoknow.cli.shared import app, err_console, validation_summary
-from pushtoknow.common.errors import PushToKnowError, first_line
+from pushtoknow.cli.shared import app, err_console, print_error, validation_summary
+from pushtoknow.common.errors import DiskFullError, PushToKnowError, first_line
 
 _register_real(app)
 
@@ -26,6 +34,8 @@ def error_message(e: BaseException) -> str | None:
     if (summary := validation_summary(e)) is not None:
         return summary
     if isinstance(e, OSError) and e.strerror:
+        if e.errno == errno.ENOSPC and e.filename:
+            return str(DiskFullError(e.filename))
         where = f"{e.filename}: " if e.filename else ""
         return f"{where}{e.strerror.lower()}"
     return None
@@ -43,6 +53,6 @@ def main() -> None:  # pragma: no cover - the installed entry point; tests call 
         message = error_message(e)
         if message is None:
             raise
-        err_console.print(f"[bold red]error:[/] {message}", highlight=False)
+        print_error(message)
         sys.exit(2)
     sys.exit(code if isinstance(code, int) else 0)

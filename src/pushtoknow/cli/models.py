@@ -12,8 +12,11 @@ from rich.table import Table
 from pushtoknow.cli.options import (
     EstimatorChoice,
     PolicyChoice,
+    checked_export,
     estimator_option,
+    export_option,
     policy_option,
+    pushes_option,
     seed_option,
     sigma_points_option,
 )
@@ -29,6 +32,7 @@ from pushtoknow.cli.shared import (
     parse_profiles,
 )
 from pushtoknow.common.errors import PushToKnowError
+from pushtoknow.common.estimators import DEFAULT_ESTIMATOR
 
 
 @app.command("push")
@@ -169,11 +173,18 @@ def run_inference(
     strip: bool = False,
     sigma_points: int | None = None,
     profiles: tuple[str, ...] | None = None,
-    estimator: str = "vt-addf",
+    estimator: str = DEFAULT_ESTIMATOR,
+    export: tuple[str, Path] | None = None,
+    overwrite: bool = False,
 ) -> dict:
-    """Shared by `infer` and `demo`: K pushes on the testbed, tables, plot, JSON. profiles:
-    None for those the model was trained on."""
-    from pushtoknow.datasets.shards import write_run_pushes
+    """Shared by `infer` and `demo`: K pushes on the testbed, tables, plot, JSON; the estimated
+    object written for a simulator when `export` (kind, path) (`checked_export`) is given.
+    profiles: None for those the model was trained on. The run's files are written as a set
+    (`atomic_write_set`) into `out`, refused when it holds another object's run unless
+    `overwrite` (`check_run_dir`)."""
+    from pushtoknow.api import export_object
+    from pushtoknow.common.files import atomic_write_set
+    from pushtoknow.datasets import shards
     from pushtoknow.inference import InferenceConfig, infer_simulated
     from pushtoknow.models.checkpoint import load_checkpoint
     from pushtoknow.pretrained import resolve_model_path
@@ -183,6 +194,8 @@ def run_inference(
     out_folder(out)
     model = load_checkpoint(resolve_model_path(model_ref))
     spec = load_object_spec(object_ref)
+    if out is not None:
+        shards.check_run_dir(out, spec, overwrite)
     truth = spec.params.as_array()
     show = Console(stderr=True, emoji=False) if as_json else console
     sim_cfg = model.sim_config
@@ -206,18 +219,32 @@ def run_inference(
         on_push=lambda e: show.print(_estimate_table(e, truth, f"after push {e.index}")),
     )
     report = result.to_json()
-    if out is not None:
-        out.mkdir(parents=True, exist_ok=True)
-        plot_estimates(result, out / "estimates.png", title=f"{spec.name} · {model.variant}")
-        (out / "estimates.json").write_text(json.dumps(report, indent=1))
-        pushes_file = write_run_pushes(out, spec, result.records, sim_cfg.model_dump_json())
+    if out is not None:  # every file to a temporary name first, then all renamed into place
+        (out / shards.RUN_PUSHES).mkdir(parents=True, exist_ok=True)
+        pushes_file, strip_file = shards.run_pushes_path(out), out / "push-1.png"
+        files = {
+            out / "estimates.png": lambda tmp: plot_estimates(
+                result, tmp, title=f"{spec.name} · {model.variant}"
+            ),
+            out / shards.RUN_ESTIMATES: json.dumps(report, indent=1),
+            pushes_file: lambda tmp: shards.write_run_pushes(
+                out, spec, result.records, sim_cfg.model_dump_json(), path=tmp
+            ),
+        }
+        if strip:
+            files[strip_file] = lambda tmp: save_push_strip(
+                result.records[0], model.camera, tmp, title=f"{spec.name}, push 1", fmt="png"
+            )
+        atomic_write_set(files)
+        if not strip:
+            strip_file.unlink(missing_ok=True)  # an earlier run's: not of these pushes
         show.print(f"estimates plot → {out / 'estimates.png'}")
         show.print(f"executed pushes → {pushes_file} (`pushtoknow identify --pushes {out}`)")
         if strip:
-            save_push_strip(
-                result.records[0], model.camera, out / "push-1.png", title=f"{spec.name}, push 1"
-            )
-            show.print(f"frame strip → {out / 'push-1.png'}")
+            show.print(f"frame strip → {strip_file}")
+    if export is not None:
+        written = export_object(result, *export)
+        show.print(f"estimated object ({export[0]}) → {', '.join(map(str, written))}")
     if as_json:
         print(json.dumps(report))
     return report
@@ -227,7 +254,7 @@ def run_inference(
 def infer(
     model: str = typer.Option("pretrained", "--model", help="RUN directory or 'pretrained'"),
     obj: str = typer.Option(..., "--object", help="catalogue:ID, a JSON/YAML file or JSON"),
-    pushes: int = typer.Option(5, "--pushes", min=1),
+    pushes: int = pushes_option(5, "pushes"),
     policy: PolicyChoice = policy_option(),
     seed: int = seed_option(),
     out: Path = typer.Option(Path("infer-out"), "--out", help="where the plot and JSON go"),
@@ -235,8 +262,16 @@ def infer(
     sigma_points: int = sigma_points_option(help="default: the model's (100)"),
     profiles: str = typer.Option(None, "--profiles", help=PROFILES_HELP),
     estimator: EstimatorChoice = estimator_option(),
+    export: tuple[str, Path] | None = export_option(),
+    overwrite: bool = typer.Option(
+        False, "--overwrite", help="replace a run of another object in --out"
+    ),
 ):
     """Push an object K times on the testbed and estimate its parameters after every push."""
+    try:
+        target = checked_export(export)
+    except PushToKnowError as e:
+        fail(e)
     run_inference(
         model,
         obj,
@@ -248,6 +283,8 @@ def infer(
         sigma_points=sigma_points,
         profiles=None if profiles is None else parse_profiles(profiles),
         estimator=estimator.value,
+        export=target,
+        overwrite=overwrite,
     )
 
 
@@ -256,12 +293,25 @@ def demo(
     out: Path = typer.Option(Path("demo-out"), "--out"),
     seed: int = seed_option(),
     model: str = typer.Option("pretrained", "--model"),
-    pushes: int = typer.Option(5, "--pushes", min=1),
+    pushes: int = pushes_option(5, "pushes"),
+    estimator: EstimatorChoice = estimator_option(),
+    overwrite: bool = typer.Option(
+        False, "--overwrite", help="replace a run of another object in --out"
+    ),
 ):
-    """Offline demo: the shipped model estimates a held-out catalogue object (never trained
-    on) from 5 pushes; prints the tables, writes the plot and a strip of rendered frames."""
+    """Offline demo: a held-out catalogue object (never trained on) estimated from 5 pushes;
+    prints the tables, writes the plot and a strip of rendered frames."""
     from pushtoknow.testbed.objects import demo_object_id
 
     run_inference(
-        model, f"catalogue:{demo_object_id()}", pushes, "uniform", seed, out, False, strip=True
+        model,
+        f"catalogue:{demo_object_id()}",
+        pushes,
+        "uniform",
+        seed,
+        out,
+        False,
+        strip=True,
+        estimator=estimator.value,
+        overwrite=overwrite,
     )

@@ -3,14 +3,16 @@
 from __future__ import annotations
 
 import enum
+from pathlib import Path
 
 import typer
+from rich.markup import escape
 
-from pushtoknow.common.estimators import ESTIMATOR_NAMES
+from pushtoknow.common.estimators import DEFAULT_ESTIMATOR, ESTIMATOR_NAMES
+from pushtoknow.common.params import MIN_SIGMA_POINTS
 from pushtoknow.common.policies import POLICY_NAMES
 
 SEED_HELP = "random seed (≥ 0): same seed, same result on the CPU"
-MIN_SIGMA_POINTS = 10
 
 
 def seed_option(default: int | None = 0, help: str = SEED_HELP):
@@ -19,8 +21,39 @@ def seed_option(default: int | None = 0, help: str = SEED_HELP):
 
 
 def sigma_points_option(default: int | None = None, help: str = "default: the model's"):
-    """The `--sigma-points` option of every command that runs the filter."""
-    return typer.Option(default, "--sigma-points", min=MIN_SIGMA_POINTS, help=help)
+    """The `--sigma-points` option of every command that runs the filter (at least
+    `common.params.MIN_SIGMA_POINTS`)."""
+    return typer.Option(
+        default,
+        "--sigma-points",
+        min=MIN_SIGMA_POINTS,
+        help=f"Monte-Carlo sigma points of the filter, ≥ {MIN_SIGMA_POINTS} ({help})",
+    )
+
+
+MAX_PUSHES = 200  # per object: a push's record (images) is ≈ 1.8 MB, held until written
+PUSH_COST = "≈ 1.8 MB of images per push, held in memory until written"
+
+
+def _bounded_pushes(value: int) -> int:
+    if value > MAX_PUSHES:
+        raise typer.BadParameter(
+            f"{value}: at most {MAX_PUSHES} pushes per object ({PUSH_COST}: {value} would hold "
+            f"≈ {value * 1.8 / 1000:.1f} GB)"
+        )
+    return value
+
+
+def pushes_option(default: int, help: str = "pushes per object"):
+    """The `--pushes` option of the commands that push objects on the testbed (at most
+    MAX_PUSHES per object: a run holds every push's images until it writes them)."""
+    return typer.Option(
+        default,
+        "--pushes",
+        min=1,
+        callback=_bounded_pushes,
+        help=f"{help}, 1–{MAX_PUSHES} ({PUSH_COST})",
+    )
 
 
 PolicyChoice = enum.Enum("PolicyChoice", {p: p for p in POLICY_NAMES}, type=str)  # CLI choices
@@ -35,7 +68,7 @@ def policy_option(default: str | None = "uniform", help: str = "push policy"):
 EstimatorChoice = enum.Enum("EstimatorChoice", {e: e for e in ESTIMATOR_NAMES}, type=str)
 
 
-def estimator_option(default: str = "vt-addf"):
+def estimator_option(default: str = DEFAULT_ESTIMATOR):
     """The `--estimator` option of every command that estimates with a model (choices from
     `common.estimators.ESTIMATOR_NAMES`)."""
     return typer.Option(
@@ -48,11 +81,39 @@ def estimator_option(default: str = "vt-addf"):
 
 RAY_HELP = (
     "run the work as Ray tasks: 'auto' starts a local Ray instance with --workers CPUs (or "
-    "joins the cluster in RAY_ADDRESS), ADDRESS joins a running cluster (ray://HEAD:10001 or "
-    "HEAD:6379); same results as the local pool; needs the pushtoknow[ray] extra"
+    "joins the cluster in RAY_ADDRESS), ADDRESS joins a running cluster (HEAD:6379, or "
+    "ray://HEAD:10001 with Ray Client: ray[client]); same results as the local pool; needs the "
+    "pushtoknow[ray] extra"
 )
 
 
 def ray_option():
     """The `--ray` option of every command that fans work out (`common.parallel`)."""
-    return typer.Option(None, "--ray", metavar="auto|ADDRESS", help=RAY_HELP)
+    return typer.Option(None, "--ray", metavar="auto|ADDRESS", help=escape(RAY_HELP))
+
+
+EXPORT_HELP = (
+    "write the estimated object for a simulator: mjcf PATH (MuJoCo) or urdf PATH (with an OBJ "
+    "mesh beside it); mass, CoM, I_z, friction and the outline as geometry"
+)
+
+
+def export_option():
+    """The `--export KIND PATH` option of the commands that estimate an object."""
+    return typer.Option(None, "--export", metavar="KIND PATH", help=EXPORT_HELP)
+
+
+def checked_export(export: tuple[str, Path] | None) -> tuple[str, Path] | None:
+    """`--export`'s (kind, path), checked before any work (`testbed.export`); None if not
+    given. Raises ExportError naming the bad kind or the missing folder."""
+    from pushtoknow.common.errors import ExportError
+    from pushtoknow.testbed.export import EXPORT_KINDS
+
+    if export is None:
+        return None
+    kind, path = export
+    if kind not in EXPORT_KINDS:
+        raise ExportError("--export", kind, f"KIND must be one of {', '.join(EXPORT_KINDS)}")
+    if not Path(path).parent.is_dir():
+        raise ExportError("--export", str(path), "its folder does not exist")
+    return kind, Path(path)

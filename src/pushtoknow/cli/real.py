@@ -14,10 +14,10 @@ from rich.console import Console
 from rich.table import Table
 
 from pushtoknow.cli.options import seed_option, sigma_points_option
+from pushtoknow.cli.shared import fail
 from pushtoknow.common.errors import PushToKnowError
 
 console = Console(emoji=False)
-err_console = Console(stderr=True, soft_wrap=True, emoji=False)
 
 
 def estimate_real(
@@ -25,8 +25,11 @@ def estimate_real(
         ..., help="a `pushtoknow import-mit` output, or a folder of raw MIT Push files"
     ),
     model: str = typer.Option("pretrained", "--model", help="RUN directory or 'pretrained'"),
-    forest_data: Path = typer.Option(
-        ..., "--forest-data", help="simulated dataset (`pushtoknow simulate`) to fit the forest on"
+    forest_data: Path | None = typer.Option(
+        None,
+        "--forest-data",
+        help="simulated dataset (`pushtoknow simulate`) to fit the random forest and the prior "
+        "mean on (without it, neither row)",
     ),
     seed: int = seed_option(),
     obj: str | None = typer.Option(
@@ -75,8 +78,7 @@ def estimate_real(
             identify=identify,
         )
     except PushToKnowError as e:
-        err_console.print(f"[bold red]error:[/] {e}")
-        raise typer.Exit(2) from None
+        fail(e)
     if out is not None:
         out.parent.mkdir(parents=True, exist_ok=True)
         out.write_text(json.dumps(report.to_json(), indent=1))

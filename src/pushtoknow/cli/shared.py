@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+import tempfile
 from pathlib import Path
 
 os.environ.setdefault("MUJOCO_GL", "egl")
@@ -13,6 +14,7 @@ import enum
 
 import typer
 from rich.console import Console
+from rich.markup import escape
 from rich.table import Table
 
 from pushtoknow.common.errors import first_line
@@ -35,7 +37,7 @@ err_console = Console(stderr=True, soft_wrap=True, emoji=False)
 
 def _version(value: bool) -> None:
     if value:
-        from pushtoknow import __version__
+        from pushtoknow.common.version import __version__
 
         print(f"pushtoknow {__version__}")
         raise typer.Exit()
@@ -48,6 +50,29 @@ def _main_options(
     ),
 ) -> None:
     """Learn an object's mass, friction, CoM and inertia by pushing it."""
+    show_warnings_as_lines()
+
+
+def show_warnings_as_lines() -> None:
+    """Print each `PushToKnowWarning` as one 'warning: …' line on stderr (every time it is
+    raised); other warnings are shown as Python shows them."""
+    import warnings
+
+    from pushtoknow.common.errors import PushToKnowWarning
+
+    shown = warnings.showwarning
+    if getattr(shown, "pushtoknow", False):
+        return
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        if issubclass(category, PushToKnowWarning):
+            print_warning(str(message))
+        else:
+            shown(message, category, filename, lineno, file, line)
+
+    show.pushtoknow = True
+    warnings.showwarning = show
+    warnings.simplefilter("always", PushToKnowWarning)
 
 
 PROFILES_HELP = (
@@ -110,9 +135,23 @@ def image_out(path: Path, option: str = "--out") -> Path:
 
 
 def out_folder(path: Path | None, option: str = "--out") -> None:
-    """Refuse, before any work, an output folder that is an existing file."""
-    if path is not None and path.exists() and not path.is_dir():
+    """Refuse, before any work, an output folder that is an existing file or that cannot be
+    written: the nearest existing folder at or above it is a file or refuses a new file (a
+    read-only file system, no permission)."""
+    if path is None:
+        return
+    if path.exists() and not path.is_dir():
         raise typer.BadParameter(f"{option} {path}: is a file, not a folder")
+    existing = path
+    while not existing.exists() and existing != existing.parent:
+        existing = existing.parent
+    if not existing.is_dir():
+        raise typer.BadParameter(f"{option} {path}: {existing} is a file, not a folder")
+    try:
+        tempfile.TemporaryFile(dir=existing).close()
+    except OSError as e:
+        why = (e.strerror or str(e)).lower()
+        raise typer.BadParameter(f"{option} {path}: cannot write in {existing} ({why})") from None
 
 
 def flatten(data: dict, prefix: str = "") -> list[tuple[str, str]]:
@@ -158,7 +197,17 @@ def validation_summary(e: Exception) -> str | None:
     return "; ".join(f"{'.'.join(map(str, d['loc'])) or '<root>'}: {d['msg']}" for d in e.errors())
 
 
+def print_error(message: str) -> None:
+    """'error: MESSAGE' on stderr, the message as it is (brackets in it are text, not markup)."""
+    err_console.print(f"[bold red]error:[/] {escape(message)}", highlight=False)
+
+
+def print_warning(message: str) -> None:
+    """'warning: MESSAGE' on stderr, one line (brackets in it are text)."""
+    err_console.print(f"[bold yellow]warning:[/] {escape(message)}", highlight=False)
+
+
 def fail(e: Exception) -> None:
-    message = validation_summary(e) or first_line(e)
-    err_console.print(f"[bold red]error:[/] {message}", highlight=False)
+    """Print `e` as a one-line error and exit with status 2."""
+    print_error(validation_summary(e) or first_line(e))
     raise typer.Exit(2)

@@ -37,14 +37,18 @@ from pydantic import Field
 
 from pushtoknow.common.config import Config
 from pushtoknow.common.errors import DatasetError
+from pushtoknow.common.files import file_sha256
 from pushtoknow.common.parallel import Workers
+from pushtoknow.common.params import MIN_SIGMA_POINTS
 from pushtoknow.common.policies import POLICY_NAMES, PolicyName
 from pushtoknow.datasets.generate import (
     GENERATION_FILE,
+    objects_file_sha256,
     prepare_dataset_dir,
     select_objects,
     write_pending_shards,
 )
+from pushtoknow.datasets.lock import dataset_lock
 from pushtoknow.datasets.shards import (
     ObjectEpisode,
     list_shards,
@@ -72,11 +76,13 @@ class CollectionConfig(Config):
     first_object_index: int = Field(0, ge=0)
     objects_per_shard: int = Field(4, gt=0)
     candidates: int = Field(16, ge=1, description="affordances sampled per push decision")
-    num_sigma_points: int | None = Field(None, ge=10, description="None: the model's")
+    num_sigma_points: int | None = Field(None, ge=MIN_SIGMA_POINTS, description="None: the model's")
     sim: SimConfig = SimConfig()
 
     def fingerprint(self) -> str:
+        """Hash of the settings; an objects FILE counts by its bytes, not its path."""
         data = self.model_dump(mode="json", exclude={"model"})
+        data["objects_from"] = objects_file_sha256(self.objects_from) or self.objects_from
         return hashlib.sha256(json.dumps(data, sort_keys=True).encode()).hexdigest()[:16]
 
 
@@ -89,14 +95,6 @@ def check_policy(policy: str) -> str:
 def checkpoint_file(model_path: Path) -> Path:
     path = Path(model_path)
     return path / "model.pt" if path.is_dir() else path
-
-
-def file_sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
 
 
 def collection_objects(cfg: CollectionConfig) -> list[ObjectSpec]:
@@ -115,6 +113,7 @@ def collect_object(model, spec: ObjectSpec, index: int, cfg: CollectionConfig) -
     rng = np.random.default_rng([cfg.seed, 3, index])
     ex_seed, inf_seed = (int(x) for x in rng.integers(2**31, size=2))
     icfg = InferenceConfig(
+        estimator="vt-addf",  # collects the learned filter's training data
         pushes=cfg.pushes,
         policy=cfg.policy,
         candidates=cfg.candidates,
@@ -218,30 +217,16 @@ def collect_dataset(
         sim=model.sim_config,
     )
     collection_objects(cfg)  # validate early, in the parent
-    prepare_dataset_dir(
-        out,
-        cfg.fingerprint(),
-        {"kind": "collect", "config": cfg.model_dump(mode="json")},
-        "made with other settings, policy or model",
-    )
     k = cfg.objects_per_shard
     plan = [list(range(s, min(s + k, cfg.objects))) for s in range(0, cfg.objects, k)]
-    _MODELS.clear()
-    _MODELS[cfg.model_sha256] = model  # the serial path reuses the loaded model
-    try:
-        written, skipped = write_pending_shards(
+    with dataset_lock(out):
+        prepare_dataset_dir(
             out,
-            plan,
             cfg.fingerprint(),
-            cfg.model_dump_json(),
-            _collect_shard,
-            workers,
-            f"collecting ({policy})",
-            progress,
-            initializer=_worker_init,
+            {"kind": "collect", "config": cfg.model_dump(mode="json")},
+            "made with other settings, policy or model",
         )
-    finally:
-        _MODELS.clear()
+        written, skipped = _write_pending(out, plan, cfg, model, workers, progress)
     return {
         "shards_written": written,
         "shards_skipped": skipped,
@@ -250,6 +235,26 @@ def collect_dataset(
         "policy": policy,
         "model_sha256": cfg.model_sha256,
     }
+
+
+def _write_pending(out, plan, cfg, model, workers, progress) -> tuple[int, int]:
+    """`write_pending_shards` of a collection, the loaded `model` cached meanwhile."""
+    _MODELS.clear()
+    _MODELS[cfg.model_sha256] = model  # the serial path reuses the loaded model
+    try:
+        return write_pending_shards(
+            out,
+            plan,
+            cfg.fingerprint(),
+            cfg.model_dump_json(),
+            _collect_shard,
+            workers,
+            f"collecting ({cfg.policy})",
+            progress,
+            initializer=_worker_init,
+        )
+    finally:
+        _MODELS.clear()
 
 
 # --------------------------------------------------------------------------------------------

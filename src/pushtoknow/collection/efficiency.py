@@ -61,6 +61,7 @@ from pydantic import Field, field_validator
 
 from pushtoknow.common.config import Config
 from pushtoknow.common.errors import DatasetError
+from pushtoknow.common.params import MIN_SIGMA_POINTS
 from pushtoknow.common.policies import POLICY_NAMES, PolicyName
 from pushtoknow.testbed.config import SimConfig
 from pushtoknow.training.pipeline import TrainConfig
@@ -78,7 +79,7 @@ class ValidationSet(Config):
     objects: int = Field(24, ge=1)
     pushes: int = Field(2, ge=1)
     objects_from: str = "catalogue-test"
-    num_sigma_points: int = Field(32, ge=10)
+    num_sigma_points: int = Field(32, ge=MIN_SIGMA_POINTS)
 
 
 class EfficiencyConfig(Config):
@@ -101,7 +102,9 @@ class EfficiencyConfig(Config):
     )
     candidates: int = Field(16, ge=1, description="affordances per push decision (collection)")
     collect_sigma_points: int | None = Field(
-        32, ge=10, description="sigma points of the filter while collecting (None: the model's)"
+        32,
+        ge=MIN_SIGMA_POINTS,
+        description="sigma points of the filter while collecting (None: the model's)",
     )
     objects_per_shard: int = Field(4, ge=1)
     workers: int = Field(2, ge=1, description="processes for simulation and collection")

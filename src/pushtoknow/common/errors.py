@@ -29,6 +29,9 @@ class ObjectSpecError(PushToKnowError, ValueError):
         self.field, self.value, self.problem = field, value, problem
         super().__init__(f"invalid object spec: {field}={value!r}: {problem}")
 
+    def __reduce__(self):  # raised in a worker process, re-raised in the parent
+        return type(self), (self.field, self.value, self.problem)
+
 
 class DatasetError(PushToKnowError):
     """A dataset file is corrupt, of another schema version, or otherwise unreadable."""
@@ -36,6 +39,29 @@ class DatasetError(PushToKnowError):
     def __init__(self, path: object, problem: str):
         self.path, self.problem = path, problem
         super().__init__(f"{path}: {problem}")
+
+    def __reduce__(self):  # raised in a worker process, re-raised in the parent
+        return type(self), (self.path, self.problem)
+
+
+class DiskFullError(PushToKnowError):
+    """The disk filled up while a file was written; the message names the file. Files written
+    atomically (`common.files`) keep their previous content."""
+
+    def __init__(self, path: object):
+        self.path = path
+        super().__init__(
+            f"disk full writing {path} (no space left on device); free some space and run the "
+            "command again"
+        )
+
+    def __reduce__(self):
+        return type(self), (self.path,)
+
+
+class PushToKnowWarning(UserWarning):
+    """A caution about the input that does not stop the work (an incomplete dataset, data
+    overlapping what is evaluated); the command line prints it as one 'warning:' line."""
 
 
 class ConfigError(PushToKnowError, ValueError):
@@ -45,6 +71,9 @@ class ConfigError(PushToKnowError, ValueError):
     def __init__(self, path: object, problem: str):
         self.path, self.problem = path, problem
         super().__init__(f"{path}: {problem}")
+
+    def __reduce__(self):
+        return type(self), (self.path, self.problem)
 
 
 class RenderingUnavailableError(PushToKnowError, RuntimeError):
@@ -76,3 +105,12 @@ class IdentificationError(PushToKnowError, ValueError):
 
 class ClusterError(PushToKnowError, RuntimeError):
     """A Ray cluster is unavailable (Ray not installed, or the address unreachable)."""
+
+
+class ExportError(PushToKnowError, ValueError):
+    """An object cannot be exported for another simulator (an invalid parameter or outline, or
+    an unwritable path); the message names the field and the value."""
+
+    def __init__(self, field: str, value: object, problem: str):
+        self.field, self.value, self.problem = field, value, problem
+        super().__init__(f"cannot export: {field}={value!r}: {problem}")

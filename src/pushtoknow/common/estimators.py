@@ -7,3 +7,4 @@ from typing import Literal, get_args
 
 EstimatorName = Literal["physics", "vt-addf"]
 ESTIMATOR_NAMES: tuple[str, ...] = get_args(EstimatorName)
+DEFAULT_ESTIMATOR: EstimatorName = "physics"  # the simulator as the filter's model (DESIGN §12)

@@ -16,12 +16,14 @@ gives the local run's bytes (docs/DESIGN.md §13).
 
 from __future__ import annotations
 
+import importlib.util
 import multiprocessing
 import os
 import socket
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import Future, ProcessPoolExecutor, as_completed
+from concurrent.futures.process import BrokenProcessPool
 from contextlib import contextmanager
 from typing import Any
 
@@ -112,6 +114,13 @@ class LocalRunner(TaskRunner):
                 results[i] = fut.result()
                 if on_done:
                     on_done(i, results[i])
+        except BrokenProcessPool:
+            self._pool = None
+            raise ClusterError(
+                "a worker process ended abruptly: out of memory or killed, or a Python script "
+                'without an `if __name__ == "__main__":` guard around its top level (worker '
+                "processes are spawned and import it)"
+            ) from None
         except BaseException:
             for fut in futures:
                 fut.cancel()
@@ -134,16 +143,27 @@ def _import_ray():
     return ray
 
 
-def check_reachable(address: str) -> None:
-    """Raise `ClusterError` unless something listens at a Ray address ([ray://]HOST:PORT)."""
+def check_reachable(address: str, where: str | None = None, hint: str = "") -> None:
+    """Raise `ClusterError` unless something listens at a Ray address ([ray://]HOST:PORT)
+    within CONNECT_TIMEOUT_S, and, for a ray:// address, Ray Client's dependencies are
+    installed. `where`: how the message names the address (default "--ray ADDRESS"); `hint`:
+    appended to the message of an unreachable address."""
+    where = where or f"--ray {address}"
     hostport = address.split("://", 1)[-1].rstrip("/")
     host, _, port = hostport.rpartition(":")
     if not host or not port.isdigit():
-        raise ClusterError(f"--ray {address}: expected auto, HOST:PORT or ray://HOST:PORT")
+        raise ClusterError(f"{where}: expected auto, HOST:PORT or ray://HOST:PORT")
+    if address.startswith("ray://") and importlib.util.find_spec("grpc") is None:
+        raise ClusterError(
+            f"{where}: a ray:// address connects through Ray Client, which needs Ray's client "
+            "extra (pip install 'ray[client]'); or give the head's GCS address, HOST:6379"
+        )
     try:
         socket.create_connection((host, int(port)), timeout=CONNECT_TIMEOUT_S).close()
     except OSError as e:
-        raise ClusterError(f"--ray {address}: no Ray cluster answers there ({e})") from None
+        raise ClusterError(
+            f"{where}: no Ray cluster answers there within {CONNECT_TIMEOUT_S:g} s ({e}){hint}"
+        ) from None
 
 
 class RayRunner(TaskRunner):
@@ -162,9 +182,16 @@ class RayRunner(TaskRunner):
         self._started = False
         if not ray.is_initialized():
             env = {k: os.environ[k] for k in FORWARDED_ENV if k in os.environ}
-            local = address == RAY_AUTO and not os.environ.get("RAY_ADDRESS")
+            from_env = os.environ.get("RAY_ADDRESS", "")
+            local = address == RAY_AUTO and not from_env
             if address != RAY_AUTO:
                 check_reachable(address)
+            elif from_env not in ("", "auto", "local"):  # else Ray finds or starts a local one
+                check_reachable(
+                    from_env,
+                    f"--ray auto with RAY_ADDRESS={from_env}",
+                    "; unset RAY_ADDRESS to start a local instance",
+                )
             try:
                 ray.init(
                     address=None if address == RAY_AUTO else address,

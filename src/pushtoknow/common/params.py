@@ -32,6 +32,11 @@ PARAM_RANGES: dict[str, tuple[float, float]] = {
     k: (min(v), max(v)) for k, v in CATALOGUE_GRID.items()
 }
 GRAVITY = 9.81  # m/s²
+# The fewest Monte-Carlo sigma points C a filter run over pushes works with: each prediction
+# whitens its state (D = 8) and process-noise (P = 3) draws jointly, which needs C > D + P
+# (`filters.base.BeliefFilter.prepare_noise`); with fewer, the sample covariance loses a little
+# rank at each of a push's ~60 steps until it is no longer positive definite.
+MIN_SIGMA_POINTS = 12
 
 
 @dataclass(frozen=True)

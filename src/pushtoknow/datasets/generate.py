@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import os
 import re
 from pathlib import Path
 from typing import Literal
@@ -17,9 +16,11 @@ import numpy as np
 import yaml
 from pydantic import Field
 
-from pushtoknow.common.config import Config
-from pushtoknow.common.errors import DatasetError, ObjectSpecError
+from pushtoknow.common.config import Config, read_utf8
+from pushtoknow.common.errors import DatasetError, ObjectSpecError, yaml_error_summary
+from pushtoknow.common.files import atomic_write, file_sha256
 from pushtoknow.common.parallel import Workers, runner_for
+from pushtoknow.datasets.lock import dataset_lock
 from pushtoknow.datasets.shards import (
     GENERATION_FILE,
     SHARD_GLOB,
@@ -58,10 +59,25 @@ class GenerationConfig(Config):
     sim: SimConfig = SimConfig()
 
     def fingerprint(self) -> str:
-        return hashlib.sha256(self.model_dump_json().encode()).hexdigest()[:16]
+        """Hash of the settings; an objects FILE counts by its bytes, not its path."""
+        digest = objects_file_sha256(self.objects_from)
+        cfg = self if digest is None else self.model_copy(update={"objects_from": digest})
+        return hashlib.sha256(cfg.model_dump_json().encode()).hexdigest()[:16]
 
     def push_speed(self, profile: str) -> float:
         return self.sim.push.profile_speed(profile)
+
+
+OBJECT_SOURCES = ("catalogue", "catalogue-train", "catalogue-test", "continuous",
+                  "catalogue-train+continuous", "novel", "random")  # fmt: skip
+
+
+def objects_file_sha256(objects_from: str) -> str | None:
+    """'sha256:HEX' of the bytes of an `objects_from` that names a file, else None."""
+    if objects_from in OBJECT_SOURCES or objects_from.startswith("random:"):
+        return None
+    path = Path(objects_from)
+    return f"sha256:{file_sha256(path)}" if path.is_file() else None
 
 
 def select_objects(objects_from: str, n: int, seed: int) -> list[ObjectSpec]:
@@ -101,7 +117,12 @@ def select_objects(objects_from: str, n: int, seed: int) -> list[ObjectSpec]:
             objects_from,
             "neither 'catalogue', 'continuous', 'novel', 'random[:SEED]' nor an existing file",
         )
-    data = yaml.safe_load(path.read_text())
+    try:
+        data = yaml.safe_load(read_utf8(path))
+    except yaml.YAMLError as e:
+        raise ObjectSpecError("--objects-from", objects_from, yaml_error_summary(e)) from None
+    except ValueError as e:  # not UTF-8 text
+        raise ObjectSpecError("--objects-from", objects_from, str(e)) from None
     items = data.get("objects", data) if isinstance(data, dict) else data
     items = items if isinstance(items, list) else [items]
     specs = [load_object_spec(x) if isinstance(x, str) else ObjectSpec.from_dict(x) for x in items]
@@ -131,11 +152,19 @@ def _make_shard(args) -> tuple[int, int]:
     out, shard_index, indices, cfg_json = args
     cfg = GenerationConfig.model_validate_json(cfg_json)
     specs = select_objects(cfg.objects_from, cfg.objects, cfg.seed)
+    fingerprint = cfg.fingerprint()
+    recorded = _recorded_fingerprint(Path(out))
+    if recorded is not None and recorded != fingerprint:  # an objects FILE edited meanwhile
+        raise DatasetError(
+            cfg.objects_from,
+            f"changed while {out} was being simulated from it (its bytes differ), so {out} "
+            "holds a run of other inputs; use another --out directory",
+        )
     episodes = [simulate_object(specs[i], i, cfg) for i in indices]
     write_shard(
         shard_path(Path(out), shard_index),
         episodes,
-        fingerprint=cfg.fingerprint(),
+        fingerprint=fingerprint,
         shard_index=shard_index,
         sim_config_json=cfg.sim.model_dump_json(),
     )
@@ -145,6 +174,40 @@ def _make_shard(args) -> tuple[int, int]:
 def shard_plan(cfg: GenerationConfig) -> list[list[int]]:
     k = cfg.objects_per_shard
     return [list(range(s, min(s + k, cfg.objects))) for s in range(0, cfg.objects, k)]
+
+
+def _recorded_fingerprint(out: Path) -> str | None:
+    """The fingerprint in `out`'s provenance record (None without a readable one)."""
+    try:
+        return json.loads((out / GENERATION_FILE).read_text()).get("fingerprint")
+    except (OSError, ValueError, AttributeError):
+        return None
+
+
+def check_objects_file(out: Path, cfg: GenerationConfig, digest: str | None) -> None:
+    """Refuse, naming the file, to resume `out` from an objects FILE whose bytes differ from
+    those it was simulated from (the other settings equal): its shards hold other objects."""
+    try:
+        record = json.loads((out / GENERATION_FILE).read_text())
+        old_cfg, old_digest = record["config"], record.get("objects_sha256")
+    except (OSError, ValueError, KeyError, TypeError):
+        return  # no record: `prepare_dataset_dir` decides
+    old_from = str(old_cfg.get("objects_from", ""))
+    was_file = old_from not in OBJECT_SOURCES and not old_from.startswith("random:")
+    same = {k: v for k, v in old_cfg.items() if k != "objects_from"} == {
+        k: v for k, v in cfg.model_dump(mode="json").items() if k != "objects_from"
+    }
+    if digest is None or not was_file or not same or old_digest == digest:
+        return
+    why = (
+        f"changed since {out} was simulated from it (its bytes differ), so {out} holds"
+        if old_digest
+        else f"{out} was simulated from it by an older pushtoknow, which did not record its "
+        f"bytes, so {out} may hold"
+    )
+    raise DatasetError(
+        cfg.objects_from, f"{why} a run of other inputs (objects); use another --out directory"
+    )
 
 
 def prepare_dataset_dir(out: Path, fingerprint: str, record: dict, refusal: str) -> None:
@@ -170,9 +233,7 @@ def prepare_dataset_dir(out: Path, fingerprint: str, record: dict, refusal: str)
             with open_shard(shard) as f:  # decide, before a record is written for them
                 if f.attrs.get("fingerprint") != fingerprint:
                     raise DatasetError(shard, f"written {refusal}; use another --out directory")
-        tmp = gen_file.with_suffix(".json.tmp")
-        tmp.write_text(json.dumps({"fingerprint": fingerprint, **record}, indent=1))
-        os.replace(tmp, gen_file)
+        atomic_write(gen_file, json.dumps({"fingerprint": fingerprint, **record}, indent=1))
     for stale in out.glob("*.h5.tmp"):
         stale.unlink()
 
@@ -218,20 +279,22 @@ def generate_dataset(
     `TaskRunner`). Returns counts of written and skipped shards."""
     out = Path(out)
     select_objects(cfg.objects_from, cfg.objects, cfg.seed)  # validate early, in the parent
-    prepare_dataset_dir(
-        out,
-        cfg.fingerprint(),
-        {"config": cfg.model_dump(mode="json")},
-        "generated with other settings",
-    )
-    written, skipped = write_pending_shards(
-        out,
-        shard_plan(cfg),
-        cfg.fingerprint(),
-        cfg.model_dump_json(),
-        _make_shard,
-        workers,
-        "simulating",
-        progress,
-    )
+    digest = objects_file_sha256(cfg.objects_from)
+    record = {"config": cfg.model_dump(mode="json")}
+    if digest is not None:  # an objects FILE: its bytes are the provenance, not its path
+        record["objects_sha256"] = digest
+    with dataset_lock(out):
+        check_objects_file(out, cfg, digest)
+        fingerprint = cfg.fingerprint()
+        prepare_dataset_dir(out, fingerprint, record, "generated with other settings")
+        written, skipped = write_pending_shards(
+            out,
+            shard_plan(cfg),
+            fingerprint,
+            cfg.model_dump_json(),
+            _make_shard,
+            workers,
+            "simulating",
+            progress,
+        )
     return {"shards_written": written, "shards_skipped": skipped, "objects": cfg.objects}

@@ -67,12 +67,13 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-import os
 from pathlib import Path
 
 import numpy as np
 
 from pushtoknow.common.errors import DatasetError
+from pushtoknow.common.files import atomic_write, file_sha256
+from pushtoknow.datasets.lock import dataset_lock
 from pushtoknow.datasets.mit_push import (
     MIT_SHAPES,
     MM_PER_M,
@@ -85,6 +86,11 @@ from pushtoknow.datasets.mit_push import (
     mit_polygon,
     parse_mit_filename,
     read_mit_push,
+)
+from pushtoknow.datasets.pad_track import (
+    MIN_DIRECTION_DISPLACEMENT,
+    contact_span,
+    push_from_track,
 )
 from pushtoknow.datasets.shards import (
     ObjectEpisode,
@@ -126,7 +132,6 @@ MIT_HEIGHT = DEFAULT_HEIGHT  # m, 13 mm stainless steel plates
 # μ grid (docs/DESIGN.md §3). Not a measurement; flagged as friction_source = "fallback".
 FALLBACK_FRICTION = 0.5
 FRICTION_VALID_RANGE = (0.01, 2.0)  # estimates outside are rejected (ObjectSpec needs μ ≤ 2)
-MIN_DIRECTION_DISPLACEMENT = 1e-3  # m of tip travel needed to define a push direction
 SHIFT_CONVENTION = (
     "p_converted = p_mit + shift, shift = -object_pose_mit[0, :2] (m), per push: the object's "
     "initial footprint centroid is at the camera centre (0, 0); theta unchanged; applied to "
@@ -198,53 +203,31 @@ def push_shift(push: MitPush) -> np.ndarray:
     return -np.asarray(push.object_pose[0, :2], dtype=np.float64)
 
 
-def _rot(th: float) -> np.ndarray:
-    c, s = math.cos(th), math.sin(th)
-    return np.array([[c, -s], [s, c]])
-
-
-def _nearest_on_boundary(poly: np.ndarray, p: np.ndarray) -> np.ndarray:
-    """Point of the closed polygon boundary (V, 2) nearest to p (2,)."""
-    a = poly
-    b = np.roll(poly, -1, axis=0)
-    ab = b - a
-    t = np.clip(np.einsum("ij,ij->i", p - a, ab) / np.einsum("ij,ij->i", ab, ab), 0.0, 1.0)
-    q = a + t[:, None] * ab
-    return q[int(np.argmin(np.linalg.norm(q - p, axis=1)))]
-
-
 def _contact_span(push: MitPush) -> tuple[int, int]:
     """(first, last) contact sample indices, (-1, -1) when the push never touches.
 
     Sample k's contact refers to the window ending at t_k, so the pusher pushed during
     [t_first - 1/rate, t_last).
     """
-    idx = np.flatnonzero(push.contact)
-    return (int(idx[0]), int(idx[-1])) if idx.size else (-1, -1)
+    return contact_span(push.contact)
 
 
 def push_action(push: MitPush, shift: np.ndarray | None = None, time_scale: float = 1.0) -> Push:
-    """The push a = (cp, pd, v) of a recording (see the module doc for the rules).
+    """The push a = (cp, pd, v) of a recording (`datasets.pad_track.push_from_track`'s rules).
 
     cp: world (m), after adding `shift` (default `push_shift`); pd: rad; v: the file's speed
     (m/s) divided by `time_scale` (see "Time rescaling" in the module doc); profile "constant".
     """
     shift = push_shift(push) if shift is None else np.asarray(shift, dtype=np.float64)
-    tip, pose = push.tip_pose, push.object_pose
-    first, last = _contact_span(push)
-    k = max(first - 1, 0)  # onset: the last sample before contact (0 without contact)
-    d = tip[last] - tip[k] if first >= 0 else np.zeros(2)
-    if np.linalg.norm(d) < MIN_DIRECTION_DISPLACEMENT:
-        d = tip[-1] - tip[0]
-    if np.linalg.norm(d) < MIN_DIRECTION_DISPLACEMENT:
-        d = pose[k, :2] - tip[k]
-    direction = math.atan2(d[1], d[0])
-    poly = mit_polygon(push.meta.shape)
-    tip_obj = _rot(pose[k, 2]).T @ (tip[k] - pose[k, :2])  # tip in the object frame at sample k
-    cp_obj = _nearest_on_boundary(poly, tip_obj)
-    cp = pose[0, :2] + _rot(pose[0, 2]) @ cp_obj + shift
-    speed = float(push.meta.speed) / float(time_scale)
-    return Push((float(cp[0]), float(cp[1])), float(direction), "constant", speed)
+    return push_from_track(
+        push.tip_pose,
+        push.object_pose,
+        push.contact,
+        push.times,
+        polygon=mit_polygon(push.meta.shape),
+        speed=float(push.meta.speed) / float(time_scale),
+        shift=shift,
+    )
 
 
 # ============================================================================================
@@ -379,10 +362,50 @@ def _plan(files: list[tuple[Path, MitPushMeta]], objects_per_shard: int) -> list
     return [objects[i : i + k] for i in range(0, len(objects), k)]
 
 
-def _fingerprint(src: Path, plan: list[list[dict]], settings: dict) -> str:
-    names = [[[str(p.relative_to(src)) for p in o["files"]] for o in sh] for sh in plan]
-    blob = json.dumps({"version": IMPORT_VERSION, "files": names, **settings}, sort_keys=True)
+def _fingerprint(src: Path, plan: list[list[dict]], settings: dict, digests: dict) -> str:
+    """Hash of the plan's relative file names and the bytes of each file (`digests`: {path:
+    SHA-256}), the import version and the settings."""
+    files = [
+        [[[str(f.relative_to(src)), digests[f]] for f in o["files"]] for o in shard]
+        for shard in plan
+    ]
+    blob = json.dumps({"version": IMPORT_VERSION, "files": files, **settings}, sort_keys=True)
     return hashlib.sha256(blob.encode()).hexdigest()[:16]
+
+
+def _refusal(old: dict, out: Path, src: Path, settings: dict, digests: dict) -> DatasetError:
+    """Why `out`, whose import.json is `old`, cannot be resumed: source files whose bytes
+    changed since (named), or other files or settings."""
+    recorded = {
+        name: digest
+        for sh in old.get("shards", [])
+        for o in sh.get("objects", [])
+        for name, digest in zip(o.get("files", []), o.get("sha256", [None] * len(o["files"])))
+    }
+    now = {str(p.relative_to(src)): d for p, d in digests.items()}
+    plain = json.loads(json.dumps(settings))
+    same = recorded.keys() == now.keys() and all(
+        old.get(k) == plain.get(k) for k in {*plain, "as_speed_m_per_s"}
+    )
+    changed = sorted(n for n in now if recorded.get(n) != now[n]) if same else []
+    if changed and all(recorded[n] is not None for n in changed):
+        more = f" (and {len(changed) - 1} other source files)" if len(changed) > 1 else ""
+        return DatasetError(
+            src / changed[0],
+            f"changed since it was imported into {out} (its bytes differ){more}, so {out} holds "
+            "an import of other inputs; use another --out directory",
+        )
+    if changed:
+        return DatasetError(
+            out,
+            f"holds an import whose source files' bytes were not recorded (an older pushtoknow; "
+            f"see {IMPORT_FILE}), so whether they changed is unknown; use another --out directory",
+        )
+    return DatasetError(
+        out,
+        f"holds a dataset imported with other files or settings (see {IMPORT_FILE}); "
+        "use another --out directory",
+    )
 
 
 def _write_shard_with_attrs(
@@ -468,18 +491,21 @@ def import_mit_dataset(
     }
     if as_speed is not None:  # only then: imports without rescaling keep their fingerprint
         settings["as_speed_m_per_s"] = float(as_speed)
-    fingerprint = _fingerprint(src, plan, settings)
+    digests = {p: file_sha256(p) for objs in plan for o in objs for p in o["files"]}
+    fingerprint = _fingerprint(src, plan, settings, digests)
+    with dataset_lock(out):
+        _prepare_out(out, src, files, plan, settings, fingerprint, digests, as_speed)
+        return _import_pending(out, src, files, plan, fingerprint, cfg, rate, as_speed, progress)
 
-    out.mkdir(parents=True, exist_ok=True)
+
+def _prepare_out(out, src, files, plan, settings, fingerprint, digests, as_speed) -> None:
+    """Accept `out` (refused when its import.json has another fingerprint, `_refusal`), write
+    import.json on first use, and drop the temp files of an interrupted run."""
     info_file = out / IMPORT_FILE
     if info_file.exists():
         old = json.loads(info_file.read_text())
         if old.get("fingerprint") != fingerprint:
-            raise DatasetError(
-                out,
-                f"holds a dataset imported with other files or settings (see {IMPORT_FILE}); "
-                "use another --out directory",
-            )
+            raise _refusal(old, out, src, settings, digests)
     else:
         info = {
             "fingerprint": fingerprint,
@@ -502,6 +528,7 @@ def import_mit_dataset(
                             "shape": o["shape"],
                             "pushes": len(o["files"]),
                             "files": [str(p.relative_to(src)) for p in o["files"]],
+                            "sha256": [digests[p] for p in o["files"]],
                         }
                         for o in objs
                     ],
@@ -511,12 +538,14 @@ def import_mit_dataset(
         }
         if as_speed is not None:
             info["time_scale_convention"] = TIME_SCALE_CONVENTION
-        tmp = info_file.with_suffix(".json.tmp")
-        tmp.write_text(json.dumps(info, indent=1))
-        os.replace(tmp, info_file)
+        atomic_write(info_file, json.dumps(info, indent=1))
     for stale in [*out.glob("*.h5.tmp"), *out.glob(f"*.h5{_PART_SUFFIX}")]:
         stale.unlink()
 
+
+def _import_pending(out, src, files, plan, fingerprint, cfg, rate, as_speed, progress) -> dict:
+    """Convert and write the shards of `plan` not yet finished in `out`."""
+    sim_json = cfg.model_dump_json()
     todo = [i for i in range(len(plan)) if not shard_is_finished(shard_path(out, i), fingerprint)]
     skipped = len(plan) - len(todo)
     total = sum(len(o["files"]) for i in todo for o in plan[i])

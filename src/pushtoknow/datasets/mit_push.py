@@ -59,6 +59,10 @@ What the reader does (`read_mit_push`), in order:
 MIT's own preprocessing (pdproc) corrects yaw jumps of multiples of π/2 in the full dataset.
 These are motion-capture flips on symmetric shapes. This reader does *not* correct them. A step
 larger than `YAW_JUMP_WARNING` between consecutive raw samples raises a `MitPushWarning`.
+
+Reading does not judge whether a push can be fitted: `check_mit_push` refuses a frozen stream,
+clocks that barely overlap, a flipped force sign and (optionally) a push without contact, with a
+one-line `DatasetError` naming the file (`pushtoknow evaluate-real` calls it on every file).
 """
 
 from __future__ import annotations
@@ -88,6 +92,7 @@ __all__ = [
     "MitPushMeta",
     "MitPushWarning",
     "MitRawStreams",
+    "check_mit_push",
     "contact_phase_force",
     "dataset_to_centroid_pose",
     "estimate_friction",
@@ -98,6 +103,7 @@ __all__ = [
     "mit_polygon",
     "parse_mit_filename",
     "read_mit_push",
+    "window_means",
 ]
 
 # --- file format -----------------------------------------------------------------------------
@@ -126,6 +132,11 @@ TARE_REST_TOLERANCE = 5e-4  # m: pusher within this of its first/last position c
 TARE_GUARD = 0.05  # s kept clear of the start/end of the pusher's motion when taring
 TARE_MIN_SAMPLES = 10  # fewer rest samples than this: no tare (offset 0)
 YAW_JUMP_WARNING = 0.5  # rad between consecutive raw object samples
+# `check_mit_push`: data errors a fit must refuse (docs/DESIGN.md §11)
+FROZEN_SHARE = 0.5  # one force reading repeated over this share of the pusher's motion: frozen
+MIN_MOTION_OVERLAP = 0.5  # share of the pusher's motion the three clocks must all cover
+AGAINST_SHARE = 0.5  # more strong contact samples than this pointing against the push: flipped
+STRONG_FORCE_SHARE = 0.5  # strong: ‖F‖ ≥ this share of the push's peak (and above contact)
 SPEED_MATCH_TOLERANCE = 5e-4  # m/s (half of the file name's 1 mm/s resolution)
 ACCELERATION_MATCH_TOLERANCE = 1e-9
 
@@ -547,7 +558,7 @@ def _force_offset(tip: np.ndarray, ft: np.ndarray) -> np.ndarray:
     return np.median(ft[rest, 1:3], axis=0)
 
 
-def _window_means(t: np.ndarray, values: np.ndarray, rate: float, k: int) -> tuple:
+def window_means(t: np.ndarray, values: np.ndarray, rate: float, k: int) -> tuple:
     """Mean of values over the windows [(i - 1)/rate, i/rate), i < k, that end at the samples
     (t relative to t_start; window 0 lies before it). A window with no sample gets np.interp at
     its centre (i - 1/2)/rate, which clamps to the first/last value outside the stream."""
@@ -624,7 +635,7 @@ def read_mit_push(
 
     offset = _force_offset(tip, ft) if tare else np.zeros(2)
     f_on_object = -(ft[:, 1:3] - offset)
-    force, counts = _window_means(ft[:, 0] - t_start, f_on_object, rate, k)
+    force, counts = window_means(ft[:, 0] - t_start, f_on_object, rate, k)
     contact = np.linalg.norm(force, axis=1) > contact_threshold
 
     return MitPush(
@@ -739,3 +750,97 @@ def estimate_friction(push: MitPush) -> float:
     if phase.size == 0:
         raise DatasetError(push.path, "no samples in contact: cannot estimate friction")
     return float(phase.mean()) / (push.obj.mass * GRAVITY)
+
+
+# ============================================================================================
+# Checks before a fit
+# ============================================================================================
+def _motion_span(tip: np.ndarray) -> tuple[float, float] | None:
+    """(t_move, t_stop) Unix s of the pusher's motion (raw tip rows), None if it never moves."""
+    xy = tip[:, 1:3]
+    moved = np.linalg.norm(xy - xy[0], axis=1) > TARE_REST_TOLERANCE
+    away = np.linalg.norm(xy - xy[-1], axis=1) > TARE_REST_TOLERANCE
+    if not moved.any():
+        return None
+    return float(tip[np.argmax(moved), 0]), float(tip[len(xy) - 1 - np.argmax(away[::-1]), 0])
+
+
+def _longest_repeat(values: np.ndarray) -> tuple[int, int]:
+    """(length, first row) of the longest run of identical consecutive rows of (N, c)."""
+    if len(values) == 0:
+        return 0, 0
+    same = np.all(np.diff(values, axis=0) == 0, axis=1)
+    best, start, run = 1, 0, 1
+    for i, s in enumerate(same, start=1):
+        run = run + 1 if s else 1
+        if run > best:
+            best, start = run, i - run + 1
+    return best, start
+
+
+def check_mit_push(push: MitPush, *, contact: bool = True) -> None:
+    """Refuse a push no estimator may fit: `DatasetError` naming the file, in one line, for
+
+    - a frozen stream: a pusher that never moves; the force (``ft_wrench`` f_x, f_y)
+      repeating one reading unchanged over ≥ `FROZEN_SHARE` of its samples while the pusher
+      moves (a real sensor's noise never repeats a reading; a stuck driver does, and taring
+      would turn it into "no force"); the object's pose (``object_pose``) at one reading
+      throughout a push in contact;
+    - clocks that cover less than `MIN_MOTION_OVERLAP` of the pusher's motion in common;
+    - no contact, when `contact`: no sample with ‖F‖ above the contact threshold (a push
+      that missed the object tells nothing about it);
+    - a flipped force sign: most strong contact samples (‖F‖ ≥ `STRONG_FORCE_SHARE` of the
+      peak) point against the pusher's motion, while the force on the object must push it.
+    """
+    raw, path = push.raw, push.path
+    span = _motion_span(raw.tip_pose)
+    if span is None:
+        raise DatasetError(path, "tip_pose: the pusher never moves")
+    t_move, t_stop = span
+    ft = raw.ft_wrench
+    moving = (ft[:, 0] >= t_move) & (ft[:, 0] <= t_stop)
+    run, first = _longest_repeat(ft[moving, 1:3])
+    if moving.sum() >= 2 and run >= FROZEN_SHARE * moving.sum():
+        value = ft[moving][first, 1:3].tolist()
+        raise DatasetError(
+            path,
+            f"ft_wrench: frozen, (f_x, f_y) = {value} N unchanged over {run} of the "
+            f"{int(moving.sum())} samples while the pusher moves",
+        )
+    t_end = push.t0 + push.duration
+    covered = max(0.0, min(t_stop, t_end) - max(t_move, push.t0))
+    if covered < MIN_MOTION_OVERLAP * (t_stop - t_move):
+        raise DatasetError(
+            path,
+            f"the three clocks overlap over {covered:.3f} s of the pusher's "
+            f"{t_stop - t_move:.3f} s motion (need {MIN_MOTION_OVERLAP:.0%})",
+        )
+    if not push.contact.any():
+        if contact:
+            raise DatasetError(
+                path,
+                f"no contact: ‖F‖ never exceeds {push.contact_threshold:g} N (the pusher "
+                "missed the object)",
+            )
+        return
+    pose = raw.object_pose[:, 1:]
+    if (pose == pose[0]).all():
+        raise DatasetError(
+            path,
+            f"object_pose: frozen, {pose[0].tolist()} at all {len(pose)} samples while the "
+            "pusher pushes the object",
+        )
+    d = push.tip_pose[-1] - push.tip_pose[0]
+    if float(np.linalg.norm(d)) <= TARE_REST_TOLERANCE:
+        return
+    mag = np.linalg.norm(push.force, axis=1)
+    strong = push.contact & (mag >= STRONG_FORCE_SHARE * float(mag[push.contact].max()))
+    along = push.force[strong] @ (d / np.linalg.norm(d))
+    against = int((along < 0).sum())
+    if against > AGAINST_SHARE * len(along):
+        raise DatasetError(
+            path,
+            f"ft_wrench: the force on the object points against the push on {against} of "
+            f"{len(along)} strong contact samples (mean {along.mean():+.3g} N along the "
+            "pusher's motion): sign flipped?",
+        )

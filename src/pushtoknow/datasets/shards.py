@@ -1,7 +1,7 @@
 """HDF5 shard format (schema version 1) for push episodes.
 
-One file per shard, `shard-NNNNN.h5`, written to `*.h5.tmp` and renamed when complete, so a
-finished shard is never half-written. Layout:
+One file per shard, `shard-NNNNN.h5`, built in memory, written to `*.h5.tmp` and renamed when
+complete, so a finished shard is never half-written. Layout:
 
     /                       attrs: schema_version, pushtoknow_version, fingerprint, shard_index,
                                    sim_config (JSON), complete=True, content_sha256
@@ -21,15 +21,17 @@ from __future__ import annotations
 
 import hashlib
 import json
-import os
+import warnings
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 
 import h5py
 import numpy as np
 
-from pushtoknow import __version__
-from pushtoknow.common.errors import DatasetError
+from pushtoknow.common.errors import DatasetError, PushToKnowWarning, first_line
+from pushtoknow.common.files import atomic_write
+from pushtoknow.common.version import __version__
 from pushtoknow.testbed.config import stored_sim_config
 from pushtoknow.testbed.objects import ObjectSpec
 from pushtoknow.testbed.push import Push
@@ -39,6 +41,7 @@ SCHEMA_VERSION = 1
 SHARD_GLOB = "shard-*.h5"
 GENERATION_FILE = "generation.json"  # a generated dataset's provenance: its config and plan
 RUN_PUSHES = "pushes"  # subfolder of an `infer` / `demo` output holding the executed pushes
+RUN_ESTIMATES = "estimates.json"  # an `infer` / `demo` output's estimates
 CHECKSUM = {"fletcher32": True}
 COMPRESSION = {"compression": "gzip", "compression_opts": 4, "shuffle": True, **CHECKSUM}
 DIGEST_ATTR = "content_sha256"
@@ -66,13 +69,23 @@ def write_shard(
     object_attrs: list[dict] | None = None,
     push_attrs: list[list[dict]] | None = None,
 ) -> None:
-    """Write a shard atomically (temp file, fsync, rename). `attrs`: extra root attributes
-    (e.g. the push policy and model of `pushtoknow collect`); `object_attrs`, `push_attrs`:
-    extra attributes per episode and per push of each episode (e.g. an import's provenance),
-    covered by the content digest like the rest."""
+    """Write a shard atomically: built in memory, then written to `*.h5.tmp`, fsynced and
+    renamed (`common.files.atomic_write`), so a full disk ends in a `DiskFullError` naming the
+    shard, never in a half-written HDF5 file. `attrs`: extra root attributes (e.g. the push
+    policy and model of `pushtoknow collect`); `object_attrs`, `push_attrs`: extra attributes
+    per episode and per push of each episode (e.g. an import's provenance), covered by the
+    content digest like the rest."""
     path = Path(path)
-    tmp = path.with_suffix(".h5.tmp")
-    with h5py.File(tmp, "w") as f:
+    build = partial(_shard_bytes, path, episodes, fingerprint, shard_index, sim_config_json)
+    atomic_write(path, lambda tmp: tmp.write_bytes(build(attrs, object_attrs, push_attrs)))
+
+
+def _shard_bytes(
+    path, episodes, fingerprint, shard_index, sim_config_json, attrs, object_attrs, push_attrs
+) -> bytes:
+    """The HDF5 file of a shard (`write_shard`), built in memory (HDF5's core driver: the
+    bytes a file on disk would hold)."""
+    with h5py.File(f"{path}.in-memory", "w", driver="core", backing_store=False) as f:
         f.attrs.update(
             schema_version=SCHEMA_VERSION,
             pushtoknow_version=__version__,
@@ -106,21 +119,56 @@ def write_shard(
                 p.create_dataset(
                     "depth", data=r.depth.astype(np.float16), chunks=(1, H, W), **COMPRESSION
                 )
-        f.attrs[DIGEST_ATTR] = content_digest(tmp, objs)
+        f.attrs[DIGEST_ATTR] = content_digest(path, objs)
         f.attrs["complete"] = True
         f.flush()
-    with open(tmp, "rb+") as fh:
-        os.fsync(fh.fileno())
-    os.replace(tmp, path)
+        return f.id.get_file_image()
 
 
-def open_shard(path: Path) -> h5py.File:
-    """Open a shard for reading, checking it is complete and of our schema version."""
+HDF5_ERRORS = (OSError, RuntimeError, KeyError, ValueError)  # what h5py raises on a damaged file
+
+
+def raised_by_hdf5(e: BaseException) -> bool:
+    """Whether `e` comes from h5py itself (a damaged file: broken object headers, B-trees or
+    chunks), not from the code reading the file: one of HDF5_ERRORS raised in an h5py frame."""
+    if not isinstance(e, HDF5_ERRORS) or isinstance(e, DatasetError):
+        return False
+    tb = e.__traceback__
+    while tb is not None and tb.tb_next is not None:
+        tb = tb.tb_next
+    return tb is not None and str(tb.tb_frame.f_globals.get("__name__", "")).startswith("h5py")
+
+
+def damaged(path: Path, e: BaseException) -> DatasetError:
+    """The DatasetError of a shard h5py cannot read (`raised_by_hdf5`)."""
+    return DatasetError(
+        path,
+        f"unreadable ({first_line(e)}): damaged, or not written by pushtoknow; move it away "
+        "and rerun the command that wrote it to write it again",
+    )
+
+
+class Shard(h5py.File):
+    """A shard open for reading (`open_shard`): an h5py.File whose `with` block turns what h5py
+    raises on damaged metadata or data into a DatasetError naming the file."""
+
+    shard_path: Path
+
+    def __exit__(self, *exc_info) -> None:
+        super().__exit__(*exc_info)
+        if exc_info[1] is not None and raised_by_hdf5(exc_info[1]):
+            raise damaged(self.shard_path, exc_info[1]) from None
+
+
+def open_shard(path: Path) -> Shard:
+    """Open a shard for reading, checking it is complete and of our schema version. In a `with`
+    block, an error h5py raises on a damaged file becomes a DatasetError naming it."""
     path = Path(path)
     try:
-        f = h5py.File(path, "r")
-    except OSError as e:
-        raise DatasetError(path, f"not a readable HDF5 shard ({e})") from None
+        f = Shard(path, "r")
+    except HDF5_ERRORS as e:
+        raise DatasetError(path, f"not a readable HDF5 shard ({first_line(e)})") from None
+    f.shard_path = path
     try:
         version = f.attrs.get("schema_version")
         if version is None:
@@ -132,8 +180,10 @@ def open_shard(path: Path) -> h5py.File:
             )
         if not bool(f.attrs.get("complete", False)) or "objects" not in f:
             raise DatasetError(path, "shard is incomplete (interrupted write)")
-    except DatasetError:
+    except BaseException as e:
         f.close()
+        if raised_by_hdf5(e):
+            raise damaged(path, e) from None
         raise
     return f
 
@@ -235,15 +285,25 @@ def read_shard(path: Path, images: bool = True) -> list[ObjectEpisode]:
         return out
 
 
+def run_pushes_path(run_dir: Path) -> Path:
+    """The shard in which an inference run in `run_dir` keeps its pushes (`write_run_pushes`)."""
+    return shard_path(Path(run_dir) / RUN_PUSHES, 0)
+
+
 def write_run_pushes(
-    run_dir: Path, spec: ObjectSpec, records: list[PushRecord], sim_config_json: str
+    run_dir: Path,
+    spec: ObjectSpec,
+    records: list[PushRecord],
+    sim_config_json: str,
+    path: Path | None = None,
 ) -> Path:
     """Keep the pushes an inference run executed as a one-object dataset in
     `run_dir`/RUN_PUSHES (shard 0, the object's true spec), so that other estimators
-    (`pushtoknow identify --pushes RUN`) can use the very same pushes. Returns the shard."""
+    (`pushtoknow identify --pushes RUN`) can use the very same pushes. `path`: write the shard
+    there instead (the temporary name of a run's files written as a set). Returns the shard."""
     folder = Path(run_dir) / RUN_PUSHES
     folder.mkdir(parents=True, exist_ok=True)
-    path = shard_path(folder, 0)
+    path = run_pushes_path(run_dir) if path is None else Path(path)
     write_shard(
         path,
         [ObjectEpisode(spec, 0, list(records))],
@@ -254,11 +314,60 @@ def write_run_pushes(
     return path
 
 
+def check_run_dir(run_dir: Path, spec: ObjectSpec, overwrite: bool = False) -> None:
+    """Refuse (`DatasetError`) to write the inference run of `spec` into `run_dir` when the
+    folder holds the run of another object, unless `overwrite`: the object whose pushes it
+    kept (`RUN_PUSHES`; a spec that differs in any field is another object), else the one its
+    `RUN_ESTIMATES` names. A run of the same object, or a folder without a run, is accepted
+    (its files are replaced)."""
+    if overwrite or not Path(run_dir).is_dir():
+        return
+    pushes, estimates = run_pushes_path(run_dir), Path(run_dir) / RUN_ESTIMATES
+    old = None
+    if pushes.exists():
+        try:
+            with open_shard(pushes) as f:
+                old = json.loads(next(iter(f["objects"].values())).attrs["spec"])
+        except (DatasetError, StopIteration, KeyError, ValueError, TypeError):
+            old = "an object whose pushes cannot be read"
+        if old == json.loads(spec.to_json()):
+            return
+    elif estimates.exists():
+        try:
+            name = json.loads(estimates.read_text()).get("object")
+        except (OSError, ValueError, AttributeError):
+            name = None
+        if name == spec.name:
+            return
+        old = name or "an unnamed object"
+    if old is None:
+        return
+    what = old if isinstance(old, str) else old.get("name") or "an unnamed object"
+    raise DatasetError(
+        run_dir,
+        f"holds the run of another object ({what}); pass --overwrite to replace it, or "
+        "use another --out folder",
+    )
+
+
 def list_shards(root: Path) -> list[Path]:
     root = Path(root)
     if not root.is_dir():
         raise DatasetError(root, "no such dataset directory")
     return sorted(root.glob(SHARD_GLOB))
+
+
+def _provenance(root: Path) -> dict | None:
+    """A dataset's GENERATION_FILE (None without one); DatasetError when it is unreadable."""
+    gen_file = Path(root) / GENERATION_FILE
+    if not gen_file.exists():
+        return None
+    try:
+        record = json.loads(gen_file.read_text())
+        int(record["config"]["objects"])
+    except (json.JSONDecodeError, KeyError, TypeError, ValueError):
+        raise DatasetError(gen_file, "unreadable provenance record") from None
+    return record
 
 
 def dataset_info(root: Path, verify: bool = False) -> dict:
@@ -271,14 +380,8 @@ def dataset_info(root: Path, verify: bool = False) -> dict:
     shards = list_shards(root)
     if not shards:
         raise DatasetError(root, f"no {SHARD_GLOB} files")
-    expected = record = None
-    gen_file = Path(root) / GENERATION_FILE
-    if gen_file.exists():
-        try:
-            record = json.loads(gen_file.read_text())
-            expected = int(record["config"]["objects"])
-        except (json.JSONDecodeError, KeyError, TypeError, ValueError):
-            raise DatasetError(gen_file, "unreadable provenance record") from None
+    record = _provenance(root)
+    expected = None if record is None else int(record["config"]["objects"])
     verified = 0 if verify else None
     objects = pushes = steps = 0
     testbed_versions = set()
@@ -316,3 +419,39 @@ def dataset_info(root: Path, verify: bool = False) -> dict:
         "bytes": int(sum(s.stat().st_size for s in shards)),
         **({} if verified is None else {"verified_shards": verified}),
     }
+
+
+def incompleteness(info: dict) -> str | None:
+    """'incomplete: N of M objects written (…)' when `dataset_info`'s `info` says its
+    provenance record plans more objects than its shards hold, else None."""
+    if info["complete"] is not False:
+        return None
+    return (
+        f"incomplete: {info['objects']} of {info['expected_objects']} objects written (an "
+        "interrupted run: the same command resumes it)"
+    )
+
+
+def warn_if_incomplete(root: Path, use: str) -> str | None:
+    """Warn (`PushToKnowWarning`, one line naming `root` and what it is used for, `use`) when
+    the dataset at `root` is incomplete (`incompleteness`: its shards hold fewer objects than
+    its provenance record plans); returns the warning's text. Reads only the shards' object
+    lists; an unreadable dataset is left to the reading that follows."""
+    try:
+        record = _provenance(root)
+        if record is None:
+            return None
+        objects = 0
+        for shard in list_shards(root):
+            with open_shard(shard) as f:
+                objects += len(f["objects"])
+    except DatasetError:
+        return None
+    expected = int(record["config"]["objects"])
+    info = {"objects": objects, "expected_objects": expected, "complete": objects >= expected}
+    note = incompleteness(info)
+    if note is None:
+        return None
+    text = f"{use} {root} is {note}"
+    warnings.warn(text, PushToKnowWarning, stacklevel=2)
+    return text

@@ -56,7 +56,11 @@ def _run_one(args) -> dict:
     model = load_checkpoint(model_path)
     spec = load_object_spec(object_ref)
     cfg = InferenceConfig(
-        pushes=pushes, policy=policy, num_sigma_points=sigma_points, profiles=profiles
+        estimator="vt-addf",
+        pushes=pushes,
+        policy=policy,
+        num_sigma_points=sigma_points,
+        profiles=profiles,
     )
     res = infer_simulated(model, spec, cfg, seed, with_truth=False)
     rows = [res.prior, *res.estimates]

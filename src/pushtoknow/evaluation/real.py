@@ -56,17 +56,18 @@ the training speed by time rescaling (exact only for quasi-static pushing; see
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 import tempfile
 import time
+import warnings
 from dataclasses import fields
 from pathlib import Path
 
-import h5py
 import numpy as np
 
-from pushtoknow.common.errors import DatasetError, IdentificationError
+from pushtoknow.common.errors import DatasetError, IdentificationError, PushToKnowWarning
 from pushtoknow.common.params import (
     GRAVITY,
     PARAM_NAMES,
@@ -75,7 +76,12 @@ from pushtoknow.common.params import (
 )
 from pushtoknow.datasets.mit_import import IMPORT_FILE, TIME_SCALE_ATTR
 from pushtoknow.datasets.mit_push import contact_phase_force, mit_object
-from pushtoknow.datasets.shards import list_shards, read_shard
+from pushtoknow.datasets.shards import (
+    list_shards,
+    open_shard,
+    read_shard,
+    warn_if_incomplete,
+)
 from pushtoknow.evaluation.metrics import param_ranges
 from pushtoknow.reporting.real import RealReport
 
@@ -124,7 +130,7 @@ def load_real_object(data_dir: Path, obj: str | None = None) -> dict:
     from pushtoknow.testbed.config import SimConfig
 
     for s in list_shards(data_dir):
-        with h5py.File(s, "r") as f:
+        with open_shard(s) as f:
             for key, g in f["objects"].items():
                 found.append((str(g.attrs["mit_surface"]), str(g.attrs["mit_shape"]), s, key))
     if not found:
@@ -145,7 +151,7 @@ def load_real_object(data_dir: Path, obj: str | None = None) -> dict:
     surface, shape, shard, key = chosen[0]
     episodes = {str(ep.object_index): ep for ep in read_shard(shard)}
     ep = episodes[key]
-    with h5py.File(shard, "r") as f:
+    with open_shard(shard) as f:
         sim_config = SimConfig.model_validate(json.loads(f.attrs["sim_config"]))
         camera = sim_config.camera.model()
         pushes = f["objects"][key]["pushes"]
@@ -304,7 +310,7 @@ def _training_features(root: Path):
     if not shards:
         raise DatasetError(root, "no shard-*.h5 files: not a simulated dataset for the forest")
     for s in shards:
-        with h5py.File(s, "r") as f:
+        with open_shard(s) as f:
             cam = SimConfig.model_validate(json.loads(f.attrs["sim_config"])).camera.model()
         for ep in read_shard(s, images=False):
             X.append(features_from_records(ep.records, cam))
@@ -313,12 +319,63 @@ def _training_features(root: Path):
     return np.concatenate(X), np.concatenate(Y), np.asarray(obj)
 
 
+def _push_digest(pose, tactile) -> str:
+    """SHA-256 of a push's recorded pose and force (the same recording, however named)."""
+    h = hashlib.sha256(np.ascontiguousarray(pose).tobytes())
+    h.update(np.ascontiguousarray(tactile).tobytes())
+    return h.hexdigest()
+
+
+def forest_overlap(forest_data: Path, real: dict) -> str | None:
+    """A warning when the forest's dataset holds the object under test (`real`, from
+    `load_real_object`): an object of the same name, pushes imported from the same MIT files
+    (same file names) or with the same recorded pose and force; None when it holds none."""
+    name = real["spec"].name
+    files = {Path(str(a["mit_file"])).name for a in real["attrs"] if "mit_file" in a}
+    digests = {_push_digest(r.pose, r.tactile) for r in real["records"]}
+    found = []  # (shard, object name, pushes in common)
+    for s in list_shards(forest_data):
+        with open_shard(s) as f:
+            for g in f["objects"].values():
+                other = str(json.loads(g.attrs["spec"]).get("name", ""))
+                pushes = g["pushes"].values()
+                same = sum(
+                    Path(str(p.attrs.get("mit_file", ""))).name in files
+                    or _push_digest(p["pose"][()], p["tactile"][()]) in digests
+                    for p in pushes
+                )
+                if same or other == name:
+                    found.append((s.name, other, same))
+    if not found:
+        return None
+    shown = ", ".join(f"{o} in {s} ({n} of its pushes shared)" for s, o, n in found[:3])
+    more = f" and {len(found) - 3} more" if len(found) > 3 else ""
+    return (
+        f"--forest-data {forest_data} holds the object under test ({name}): {shown}{more}; the "
+        "forest and the prior mean are fitted on it, so their errors are not a test (fit them "
+        "on simulated data, `pushtoknow simulate`)"
+    )
+
+
+def rate_note(real: dict, model) -> str | None:
+    """A note when the real pushes' clock (the import's rate) is not the model's."""
+    rate, model_rate = real["sim_config"].tactile.rate_hz, model.sim_config.tactile.rate_hz
+    if math.isclose(rate, model_rate, rel_tol=1e-9):
+        return None
+    return (
+        f"rate: the pushes were imported at {rate:g} Hz, the model runs at {model_rate:g} Hz: "
+        f"the filter takes one step per sample ({rate / model_rate:.3g}x the steps per second "
+        f"it was trained with) and its intervals assume {model_rate:g} Hz samples, so they are "
+        f"not calibrated here; import with --rate {model_rate:g}"
+    )
+
+
 def real_inference_config(pushes: int, num_sigma_points: int | None = None):
     """`InferenceConfig` of the filter on recorded pushes (each starts at its motion-capture
     pose)."""
     from pushtoknow.inference.estimator import InferenceConfig
 
-    return InferenceConfig(pushes=pushes, num_sigma_points=num_sigma_points)
+    return InferenceConfig(estimator="vt-addf", pushes=pushes, num_sigma_points=num_sigma_points)
 
 
 def _run_filter(model, records, camera, seed: int, num_sigma_points: int | None):
@@ -350,7 +407,7 @@ def _run_filter(model, records, camera, seed: int, num_sigma_points: int | None)
 def estimate_real_object(
     data_dir: Path,
     model_path: Path,
-    forest_data: Path,
+    forest_data: Path | None = None,
     seed: int = 0,
     *,
     obj: str | None = None,
@@ -368,8 +425,9 @@ def estimate_real_object(
     `import_dir`, default a temporary directory, time-rescaled to the model's training speed
     unless `rescale` is False; see `prepare_real_data`); model_path: a checkpoint or run
     directory (see `pushtoknow.pretrained.resolve_model_path`); forest_data: a simulated
-    dataset directory to fit the forest on; obj: see `load_real_object`; num_sigma_points:
-    None = the model's; identify: also fit φ by replaying the pushes in MuJoCo
+    dataset directory to fit the forest and the prior mean on (None: neither row, their
+    entries None and absent from `errors` and `mu_m`); obj: see `load_real_object`;
+    num_sigma_points: None = the model's; identify: also fit φ by replaying the pushes in MuJoCo
     (`identify_real`), with `identify_config` (an `IdentifyConfig`, None: the defaults).
 
     Returns a `RealReport` (its `to_json()` has the keys `REPORT_KEYS`), all SI:
@@ -401,6 +459,10 @@ def estimate_real_object(
 
     t0 = time.perf_counter()
     model = load_checkpoint(Path(model_path))
+    cautions: list[str | None] = []
+    if forest_data is not None:  # first: a bad one fails before any work
+        X, Y, obj_idx = _training_features(Path(forest_data))
+        cautions.append(warn_if_incomplete(Path(forest_data), "--forest-data"))
     train_speed = model.sim_config.push.speed  # the constant pushes it was trained on
     with tempfile.TemporaryDirectory(prefix="pushtoknow-mit-") as tmp:
         target = Path(import_dir) if import_dir is not None else Path(tmp) / "import"
@@ -416,6 +478,9 @@ def estimate_real_object(
             data_dir,
             f"rendered with camera {camera}, the model was trained with {model.camera}",
         )
+    if forest_data is not None and (overlap := forest_overlap(Path(forest_data), real)):
+        warnings.warn(overlap, PushToKnowWarning, stacklevel=2)
+        cautions.append(overlap)
 
     # ---- reference truth -------------------------------------------------------------------
     ref = mit_object(real["shape"])
@@ -439,12 +504,12 @@ def estimate_real_object(
     filt_mu_m = [product_moments(e.mean_norm, e.cov_norm) for e in [prior, *estimates]]
 
     # ---- forest and prior mean -------------------------------------------------------------
-    X, Y, obj_idx = _training_features(Path(forest_data))
-    forest = ForestBaseline(ForestConfig(n_estimators=forest_trees, seed=seed)).fit(X, Y)
-    feats = features_from_records(records, camera)  # recorded (motion-capture) poses
-    f_mean, f_std = forest.predict_object(feats)
-    _, first = np.unique(obj_idx, return_index=True)
-    prior_mean = PriorMeanPredictor().fit(Y[first]).mean_
+    if forest_data is not None:
+        forest = ForestBaseline(ForestConfig(n_estimators=forest_trees, seed=seed)).fit(X, Y)
+        feats = features_from_records(records, camera)  # recorded (motion-capture) poses
+        f_mean, f_std = forest.predict_object(feats)
+        _, first = np.unique(obj_idx, return_index=True)
+        prior_mean = PriorMeanPredictor().fit(Y[first]).mean_
 
     # ---- physics-based identification -------------------------------------------------------
     ident = identify_real(data_dir, real, seed, identify_config) if identify else None
@@ -452,10 +517,11 @@ def estimate_real_object(
     # ---- errors ------------------------------------------------------------------------------
     errors = {
         "filter": [_errors(e.mean, truth) for e in estimates],
-        "forest": [_errors(m, truth) for m in f_mean],
-        "prior_mean": _errors(prior_mean, truth),
         "filter_prior": _errors(prior.mean, truth),
     }
+    if forest_data is not None:
+        errors["forest"] = [_errors(m, truth) for m in f_mean]
+        errors["prior_mean"] = _errors(prior_mean, truth)
     if ident is not None:
         errors["identify"] = [
             _errors(np.array([p[n]["mean"] for n in PARAM_NAMES]), truth) for p in ident["per_push"]
@@ -469,14 +535,13 @@ def estimate_real_object(
         "truth": mu_m_true,
         "filter_prior": {"mean": filt_mu_m[0][0], "std": filt_mu_m[0][1]},
         "filter": [{"mean": m, "std": s} for m, s in filt_mu_m[1:]],
-        "forest": [float(m[0] * m[1]) for m in f_mean],
-        "prior_mean": float(prior_mean[0] * prior_mean[1]),
     }
-    mu_m["errors"] = {
-        "filter": [perr(p["mean"]) for p in mu_m["filter"]],
-        "forest": [perr(v) for v in mu_m["forest"]],
-        "prior_mean": perr(mu_m["prior_mean"]),
-    }
+    mu_m["errors"] = {"filter": [perr(p["mean"]) for p in mu_m["filter"]]}
+    if forest_data is not None:
+        mu_m["forest"] = [float(m[0] * m[1]) for m in f_mean]
+        mu_m["prior_mean"] = float(prior_mean[0] * prior_mean[1])
+        mu_m["errors"]["forest"] = [perr(v) for v in mu_m["forest"]]
+        mu_m["errors"]["prior_mean"] = perr(mu_m["prior_mean"])
     if ident is not None:
         mu_m["identify"] = [p["mu_m"] for p in ident["per_push"]]
         mu_m["errors"]["identify"] = [perr(p["mean"]) for p in mu_m["identify"]]
@@ -501,11 +566,12 @@ def estimate_real_object(
             }
         )
     notes = _notes(truth, pushes, train_speed, model, mu_true)
+    notes += [c for c in (*cautions, rate_note(real, model)) if c is not None]
     return RealReport(
         object=f"{real['surface']}:{real['shape']}",
         data_dir=str(data_dir),
         model=str(model_path),
-        forest_data=str(forest_data),
+        forest_data=None if forest_data is None else str(forest_data),
         seed=seed,
         conversion=conversion,
         pushes=pushes,
@@ -518,13 +584,15 @@ def estimate_real_object(
             "prior": prior.as_dict(),
             "per_push": [e.as_dict() for e in estimates],
         },
-        forest={
+        forest=None
+        if forest_data is None
+        else {
             "per_push": [_params_dict(m, s) for m, s in zip(f_mean, f_std)],
             "training_pushes": len(X),
             "trees": forest_trees,
         },
         identify=ident,
-        prior_mean=_params_dict(prior_mean),
+        prior_mean=None if forest_data is None else _params_dict(prior_mean),
         errors=errors,
         mu_m=mu_m,
         ranges={n: list(PARAM_RANGES[n]) for n in PARAM_NAMES},

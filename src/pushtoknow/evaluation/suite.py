@@ -48,7 +48,7 @@ from scipy.stats import norm
 from pushtoknow.baselines.random_forest import ForestBaseline, ForestConfig, features_from_dataset
 from pushtoknow.common.config import Config
 from pushtoknow.common.parallel import TaskRunner, Workers
-from pushtoknow.common.params import PARAM_NAMES
+from pushtoknow.common.params import MIN_SIGMA_POINTS, PARAM_NAMES
 from pushtoknow.common.policies import POLICY_NAMES
 from pushtoknow.evaluation.heldout import HeldoutRun, evaluate_heldout
 from pushtoknow.evaluation.metrics import (
@@ -67,9 +67,10 @@ FOREST = "forest"
 FOREST_VISNET = "forest-visnet"
 ORACLE_KEY = "oracle"  # evaluation.identification.ORACLE
 INTERVAL_LEVEL = 0.9  # the interval every estimate reports (docs/DESIGN.md §2)
-# What an inference-run cache holds, part of its key: 2 added each estimate's interval (lower,
-# upper), so a run cached before is recomputed rather than read without them.
-CACHE_FORMAT = 2
+# What an inference-run cache holds and how its runs were drawn, part of its key: 2 holds each
+# estimate's interval (lower, upper); 3 runs drew from the named random streams
+# (`common.random`). A run cached under another format is recomputed, never read.
+CACHE_FORMAT = 3
 
 
 class EvaluationConfig(Config):
@@ -82,7 +83,7 @@ class EvaluationConfig(Config):
     folds: int = Field(5, ge=2)
     seed: int = 0
     workers: int = Field(2, ge=1)
-    sigma_points: int | None = Field(None, ge=10)
+    sigma_points: int | None = Field(None, ge=MIN_SIGMA_POINTS)
     forest_trees: int = Field(200, ge=1)
     oracle: bool = Field(
         False,
@@ -318,10 +319,10 @@ def _oracle_run(
     for a in (base.push_actions, base.push_tracks):
         h.update(np.ascontiguousarray(a).tobytes())
     from pushtoknow.evaluation import identification
-    from pushtoknow.identification import fit
+    from pushtoknow.identification import fit, optimise, replay, residuals
 
     # the code of the fit and of the row too: a changed algorithm must not reuse old rows
-    for module in (fit, identification):
+    for module in (fit, optimise, residuals, replay, identification):
         h.update(Path(module.__file__).read_bytes())
     identify_settings = identification.ORACLE_SETTINGS.model_dump(exclude={"workers"})
     h.update(

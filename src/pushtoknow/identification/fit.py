@@ -27,6 +27,10 @@ plus δδᵀ, δ the last Gauss–Newton step (a polish with a central-differenc
 the optimum may still be from where the search stopped. Reported (`common.estimate`): m, μ, I_z
 log-normal, the CoM the Gaussian truncated to where a CoM can lie (the footprint's convex hull
 less the testbed's `COM_MARGIN`), each parameter's mean, std and interval from one distribution.
+
+Stages (docs/DESIGN.md §12), each a function with a frozen dataclass between: `fit_problem`
+(residuals, objective) → `fit_starts` → `optimise` (Levenberg–Marquardt,
+`optimise.levenberg_marquardt`) → `posterior` (intervals) → `report`.
 """
 
 from __future__ import annotations
@@ -49,6 +53,13 @@ from pushtoknow.common.params import (
     space_scale,
 )
 from pushtoknow.identification.config import IdentifyConfig
+from pushtoknow.identification.optimise import (
+    DescentSettings,
+    Objective,
+    central_jacobian,
+    clip_step,
+    levenberg_marquardt,
+)
 from pushtoknow.identification.prior import fit_transform, prior_moments
 from pushtoknow.identification.replay import (
     PushTrack,
@@ -56,7 +67,7 @@ from pushtoknow.identification.replay import (
     RolloutPool,
     feasible,
 )
-from pushtoknow.identification.residuals import ReplayResiduals, huber_cost, huber_weights
+from pushtoknow.identification.residuals import ReplayResiduals
 from pushtoknow.testbed.config import SimConfig, check_testbed_version
 from pushtoknow.testbed.objects import COM_MARGIN
 from pushtoknow.testbed.push import Push, pad_positions
@@ -183,8 +194,9 @@ class Identification:
 
 def tracks_from_records(records: Sequence[PushRecord], sim_config: SimConfig) -> list[PushTrack]:
     """The pushes to replay. A push whose recorded pad track follows its speed profile (within
-    `TRACK_TOLERANCE`; every simulated push) is replayed with that profile from its recorded
-    start; any other (a real pusher's) is replayed along its recorded pad track. Raises
+    `TRACK_TOLERANCE`) over the settings' whole horizon (every simulated push) is replayed with
+    that profile from its recorded start; any other (a real pusher's, a shorter one) is
+    replayed along its recorded pad track. Raises
     IdentificationError if there are none, or if a push is too short or not finite."""
     if not records:
         raise IdentificationError("no pushes to identify from")
@@ -196,11 +208,13 @@ def tracks_from_records(records: Sequence[PushRecord], sim_config: SimConfig) ->
         for name, a in arrays.items():
             if not np.isfinite(a).all():
                 raise IdentificationError(f"push {i}: non-finite values in its {name} track")
+        samples = int(round(sim_config.push.horizon * sim_config.tactile.rate_hz)) + 1
         try:
             want = pad_positions(r.push, r.time, sim_config.push, start=r.pusher[0])
             follows = float(np.max(np.linalg.norm(want - r.pusher, axis=1))) <= TRACK_TOLERANCE
         except ValueError:
             follows = False
+        follows = follows and len(r.time) == samples  # a profile replays the whole horizon
         tracks.append(
             PushTrack(
                 r.push,
@@ -329,254 +343,356 @@ def laplace_posterior(
     return 0.5 * (cov + cov.T), lam, vecs, flat
 
 
-def identify(
-    records: Sequence[PushRecord],
-    scene: ReplayScene,
-    config: IdentifyConfig | None = None,
-    seed: int = 0,
-    progress: Callable[[int], None] | None = None,
-    pool: RolloutPool | None = None,
-) -> Identification:
-    """Fit φ to recorded pushes of one object by replaying them in the testbed's scene.
+@dataclass(frozen=True, eq=False)
+class FitProblem:
+    """The residual stage of `identify`: what its later stages share.
 
-    records: the object's pushes (K, each T samples); scene: its footprint and the simulation
-    settings the pushes were recorded with. progress(n) is called with the number of candidate
-    φ replayed after every batch. Same inputs and seed, same result (any number of workers).
-    """
-    cfg = config or IdentifyConfig()
-    t0 = time.perf_counter()
-    check_testbed_version(scene.sim_config, "the pushes")
-    tracks = tracks_from_records(records, scene.sim_config)
+    records (K): the pushes and `tracks` (K) what replays them; residuals: their replay misfit
+    in noise units (`ReplayResiduals`, its `sigmas` (5,) the noise a stage weighs by); objective:
+    the MAP objective over the fit coordinates u (5,) (`optimise.Objective`: Huber on the force,
+    the feasibility penalties, the prior); transform (5, 5): normalised parameters → fit
+    coordinates (`prior.fit_transform`); prior_z, prior_cov_z (5,), (5, 5): the prior over
+    normalised parameters, prior_u, prior_cov_u, prior_chol the same in fit coordinates (and its
+    Cholesky factor); descent: the Levenberg–Marquardt settings; quasi_static: the quasi-static
+    rule applies (every push constant, ≤ `QUASI_STATIC_SPEED`); noise_unknown: the recording
+    has no force noise level (real data); rollouts_before, push_rollouts_before: the pool's
+    counters when the fit began; progress: told the number of candidates after each batch."""
+
+    records: Sequence[PushRecord]
+    scene: ReplayScene
+    config: IdentifyConfig
+    seed: int
+    pool: RolloutPool
+    progress: Callable[[int], None] | None
+    tracks: list[PushTrack]
+    residuals: ReplayResiduals
+    objective: Objective
+    transform: np.ndarray
+    prior_z: np.ndarray
+    prior_cov_z: np.ndarray
+    prior_u: np.ndarray
+    prior_cov_u: np.ndarray
+    prior_chol: np.ndarray
+    descent: DescentSettings
+    quasi_static: bool
+    noise_unknown: bool
+    rollouts_before: int
+    push_rollouts_before: int
+
+    def replayed(self, n: int) -> None:
+        """Report n candidates replayed to `progress`."""
+        if self.progress is not None:
+            self.progress(n)
+
+    def reduced_chi2(self, r_data: np.ndarray) -> float:
+        """Reduced χ² of data residuals r_data (n_data,) (any shape of n_data elements)."""
+        return float(np.sum(r_data**2) / max(self.residuals.n_data - 5, 1))
+
+
+@dataclass(frozen=True, eq=False)
+class Starts:
+    """The screened starts, best first: u (S, 5) fit coordinates, residuals (S, M) and cost (S,)
+    (the MAP objective); closed_form: `closed_form_start`'s reading of the records."""
+
+    u: np.ndarray
+    residuals: np.ndarray
+    cost: np.ndarray
+    closed_form: dict
+
+
+@dataclass(frozen=True, eq=False)
+class Optimum:
+    """The MAP fit: u (5,) fit coordinates, r (M,) its residuals, `cost` its objective and chi2
+    its reduced χ², all under `sigmas` (5,: force x, y (N), x, y (m), θ (rad)), the noise weighed
+    by at the end (the misfit's without a noise level, raised by the poor-fit rule); raised
+    (5,): the poor-fit rule's factors on the noise (1: none); poor: that rule applied; coarse:
+    the coarse-to-fine descent found u; starts: starts refined; iterations: Levenberg–Marquardt
+    iterations in all."""
+
+    u: np.ndarray
+    r: np.ndarray
+    cost: float
+    chi2: float
+    sigmas: np.ndarray
+    raised: np.ndarray
+    poor: bool
+    coarse: bool
+    starts: int
+    iterations: int
+
+
+@dataclass(frozen=True, eq=False)
+class Posterior:
+    """The Laplace posterior at the optimum, combined with the prior: mean_z (5,), cov_z (5, 5)
+    over the normalised parameters, the CoM in the replay footprint's frame (before the scene's
+    `frame_offset`); chi2: reduced χ² after the polish under the noise weighed by, fit_chi2
+    under the noise the fit was given (before a poor fit's was raised); data_information (5, 5):
+    JᵀWJ / max(1, χ²) in fit coordinates (less the blind directions where dropped); last_step
+    (5,): the Gauss–Newton polish (fit coordinates); information (5,): the data information's
+    prior-whitened eigenvalues, ascending; unidentified: the flat directions as text; spread
+    (5, 5) or None: the leave-one-push-out jackknife covariance added to cov_z."""
+
+    mean_z: np.ndarray
+    cov_z: np.ndarray
+    chi2: float
+    fit_chi2: float
+    data_information: np.ndarray
+    last_step: np.ndarray
+    information: np.ndarray
+    unidentified: tuple[str, ...]
+    spread: np.ndarray | None
+
+
+def fit_problem(
+    records: Sequence[PushRecord],
+    tracks: list[PushTrack],
+    scene: ReplayScene,
+    config: IdentifyConfig,
+    seed: int,
+    pool: RolloutPool,
+    progress: Callable[[int], None] | None = None,
+) -> FitProblem:
+    """The residual stage: the noise model, the replay residuals of `tracks` (K) and the MAP
+    objective over the fit coordinates, with the prior (module doc)."""
+    cfg = config
     quasi_static = cfg.quasi_static_rule and all(is_quasi_static(t.push) for t in tracks)
-    footprint = scene.footprint
     recorded_noise = scene.sim_config.tactile.force_noise_std
     noise_unknown = cfg.force_noise is None and recorded_noise == 0.0
     sigma_f = cfg.force_noise or (UNKNOWN_FORCE_NOISE if noise_unknown else recorded_noise)
     sigmas = np.array([sigma_f, sigma_f, cfg.position_noise, cfg.position_noise, cfg.angle_noise])
-    own_pool = pool is None
-    pool = pool or RolloutPool(cfg.workers)
-    start_rollouts, start_push = pool.rollouts, pool.push_rollouts
-
+    rollouts_before, push_rollouts_before = pool.rollouts, pool.push_rollouts
     tmat = fit_transform()
     z_prior, p_z = prior_moments()
     u_prior = tmat @ z_prior
     p_u = tmat @ p_z @ tmat.T
     p_u_inv = np.linalg.inv(p_u)
     chol = np.linalg.cholesky(p_u)
+    prob = ReplayResiduals(scene, tracks, pool, sigmas)
+    objective = Objective(prob.residuals, prob.n_data, prob.robust, cfg.huber, u_prior, p_u_inv)
+    descent = DescentSettings(
+        max_iterations=cfg.max_iterations,
+        max_step=cfg.max_step,
+        step_tolerance=cfg.step_tolerance,
+        cost_tolerance=cfg.cost_tolerance,
+        fd_steps=cfg.fd_steps,
+        trials=4,
+    )
+    return FitProblem(
+        records=records,
+        scene=scene,
+        config=cfg,
+        seed=seed,
+        pool=pool,
+        progress=progress,
+        tracks=tracks,
+        residuals=prob,
+        objective=objective,
+        transform=tmat,
+        prior_z=z_prior,
+        prior_cov_z=p_z,
+        prior_u=u_prior,
+        prior_cov_u=p_u,
+        prior_chol=chol,
+        descent=descent,
+        quasi_static=quasi_static,
+        noise_unknown=noise_unknown,
+        rollouts_before=rollouts_before,
+        push_rollouts_before=push_rollouts_before,
+    )
 
-    def report(n: int) -> None:
-        if progress is not None:
-            progress(n)
 
-    try:
-        prob = ReplayResiduals(scene, tracks, pool, sigmas)
+def fit_starts(problem: FitProblem) -> Starts:
+    """The starts: the closed form (`closed_form_start`; CoM at the centroid) and
+    `screen_starts` prior draws, screened by one batched rollout and ordered by objective."""
+    cfg, tmat, z_prior = problem.config, problem.transform, problem.prior_z
+    cf = closed_form_start(problem.records, problem.scene.sim_config)
+    z_cf = z_prior.copy()
+    i_m, i_mu = PARAM_NAMES.index("mass"), PARAM_NAMES.index("friction")
+    mass0 = cf["mass"] if cf["mass"] is not None else float(denormalise_params(z_prior)[i_m])
+    z_cf[i_m] = normalise_params(np.array([mass0, 0.5, 0, 0, 1e-3]))[i_m]
+    if cf["mu_m"] is not None:
+        z_cf[i_mu] = normalise_params(np.array([1.0, cf["mu_m"] / mass0, 0, 0, 1e-3]))[i_mu]
+    z_cf[2:4] = normalise_params(np.array([1.0, 0.5, 0.0, 0.0, 1e-3]))[2:4]
+    rng = np.random.default_rng(problem.seed)
+    starts = [tmat @ z_cf]
+    # the steady force of a constant push is at most μ·m·g (an off-centre push needs
+    # less), so the draws keep μ·m between the closed form and MU_M_START_SPAN times it
+    s = space_scale()
+    per_log = 1.0 / (s[i_m] + s[i_mu])  # u_0 per unit of log μ·m (`fit_transform`)
+    span = np.log(MU_M_START_SPAN)
+    for _ in range(cfg.screen_starts):
+        z = rng.multivariate_normal(z_prior, problem.prior_cov_z)
+        u = tmat @ z
+        u[0] = starts[0][0] + rng.uniform(0.0, span) * per_log
+        starts.append(u)
+    us = np.stack(starts)
+    res = problem.residuals.residuals(us)
+    problem.replayed(len(us))
+    cost = np.array([problem.objective.cost(r, u) for r, u in zip(res, us)])
+    order = np.argsort(cost, kind="stable")
+    return Starts(us[order], res[order], cost[order], cf)
 
-        def costs(res: np.ndarray, us: np.ndarray) -> np.ndarray:
-            n = prob.n_data
-            out = []
-            for r, u in zip(res, us):
-                d = u - u_prior
-                out.append(
-                    huber_cost(r[:n], cfg.huber, prob.robust)
-                    + 0.5 * float(r[n:] @ r[n:])
-                    + 0.5 * d @ p_u_inv @ d
-                )
-            return np.array(out)
 
-        # ---- starts: closed form + prior draws, screened by one batched rollout
-        cf = closed_form_start(records, scene.sim_config)
-        z_cf = z_prior.copy()
-        i_m, i_mu = PARAM_NAMES.index("mass"), PARAM_NAMES.index("friction")
-        mass0 = cf["mass"] if cf["mass"] is not None else float(denormalise_params(z_prior)[i_m])
-        z_cf[i_m] = normalise_params(np.array([mass0, 0.5, 0, 0, 1e-3]))[i_m]
-        if cf["mu_m"] is not None:
-            z_cf[i_mu] = normalise_params(np.array([1.0, cf["mu_m"] / mass0, 0, 0, 1e-3]))[i_mu]
-        z_cf[2:4] = normalise_params(np.array([1.0, 0.5, 0.0, 0.0, 1e-3]))[2:4]
-        rng = np.random.default_rng(seed)
-        starts = [tmat @ z_cf]
-        # the steady force of a constant push is at most μ·m·g (an off-centre push needs
-        # less), so the draws keep μ·m between the closed form and MU_M_START_SPAN times it
-        s = space_scale()
-        per_log = 1.0 / (s[i_m] + s[i_mu])  # u_0 per unit of log μ·m (`fit_transform`)
-        span = np.log(MU_M_START_SPAN)
-        for _ in range(cfg.screen_starts):
-            z = rng.multivariate_normal(z_prior, p_z)
-            u = tmat @ z
-            u[0] = starts[0][0] + rng.uniform(0.0, span) * per_log
-            starts.append(u)
-        starts = np.stack(starts)
-        res = prob.residuals(starts)
-        report(len(starts))
-        order = np.argsort(costs(res, starts), kind="stable")
+def optimise(problem: FitProblem, starts: Starts) -> Optimum:
+    """The optimise stage: Levenberg–Marquardt (`optimise.levenberg_marquardt`) from the best
+    start, the next one only while the reduced χ² stays above `restart_chi2`; a fit still poor
+    gets the coarse-to-fine descent; then the noise from the misfit (a recording without a
+    noise level, refined once under it) or the poor-fit rule's raised noise."""
+    cfg, prob = problem.config, problem.residuals
+    n = prob.n_data
+    iterations = 0
 
-        n = prob.n_data
-        fd = np.asarray(cfg.fd_steps, dtype=np.float64)
-        iterations = 0
+    def refine(u: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, float]:
+        """Levenberg–Marquardt from u (residuals r) → (u, r, cost, reduced χ²)."""
+        nonlocal iterations
+        d = levenberg_marquardt(problem.objective, u, r, problem.descent, None, problem.replayed)
+        iterations += d.iterations
+        return d.u, d.r, d.cost, problem.reduced_chi2(d.r[:n])
 
-        def reduced_chi2(r_data: np.ndarray) -> float:
-            return float(np.sum(r_data**2) / max(n - 5, 1))
+    best = None
+    refined = 0
+    for u0, r0 in zip(starts.u[: cfg.refine_starts], starts.residuals[: cfg.refine_starts]):
+        refined += 1
+        fit = refine(u0.copy(), r0)
+        if best is None or fit[2] < best[2]:
+            best = fit
+        if best[3] <= cfg.restart_chi2:
+            break
+    assert best is not None  # refine_starts ≥ 1 and the closed-form start is always there
+    coarse = False
+    if not problem.noise_unknown and best[3] > cfg.restart_chi2 and cfg.coarse_pose_factor > 1.0:
+        # a fit still poor after every start is usually caught where the pose misfit's
+        # landscape is rough (a disc's spin, a CoM near an edge): descend once more with
+        # the pose track weighted as if `coarse_pose_factor` times noisier (a smoother
+        # landscape led by the force), then refine under the true weights from there.
+        # (Without a noise level, χ² is not yet a measure of fit.)
+        true_sigmas = prob.sigmas.copy()
+        prob.sigmas[[2, 3, 4]] *= cfg.coarse_pose_factor
+        r_c = prob.residuals(best[0][None])[0]
+        problem.replayed(1)
+        u_c, *_ = refine(best[0].copy(), r_c)
+        prob.sigmas = true_sigmas
+        r_c = prob.residuals(u_c[None])[0]
+        problem.replayed(1)
+        fit = refine(u_c, r_c)
+        if fit[2] < best[2]:
+            best, coarse = fit, True
+    u, r, cost, chi2 = best
+    poor, raised = False, np.ones(5)  # raised: the poor-fit rule's factors on the noise
+    if problem.noise_unknown:
+        # the recording has no noise level: each channel group's noise is its misfit at
+        # the optimum (force, position, angle), and the fit is refined once under it
+        prob.sigmas *= misfit_noise_scale(r[:n].reshape(-1, 5), prob.push_lengths)
+        u, r, cost, chi2 = refine(u, prob.residuals(u[None])[0])
+    elif cfg.poor_fit_rule and chi2 > cfg.restart_chi2:
+        # the replay cannot bring the misfit to the noise level: model error or a local
+        # optimum the noise model leaves out. As for a recording without a noise level,
+        # each channel group's noise is raised to its misfit, counted by its effective
+        # number of samples (a systematic misfit runs in long correlated stretches)
+        poor = True
+        raised = np.maximum(misfit_noise_scale(r[:n].reshape(-1, 5), prob.push_lengths), 1.0)
+        prob.sigmas *= raised
+        r = np.concatenate([(r[:n].reshape(-1, 5) / raised).reshape(-1), r[n:]])
+        cost = problem.objective.cost(r, u)
+        chi2 = problem.reduced_chi2(r[:n])
+    return Optimum(u, r, cost, chi2, prob.sigmas.copy(), raised, poor, coarse, refined, iterations)
 
-        def refine(u: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, float]:
-            """Levenberg–Marquardt from u (residuals r) → (u, r, cost, reduced χ²)."""
-            nonlocal iterations
-            cost = costs(r[None], u[None])[0]
-            lam = 1e-2
-            for _ in range(cfg.max_iterations):
-                iterations += 1
-                probe = u[None] + np.diag(fd)
-                rj = prob.residuals(probe)
-                report(5)
-                jac = ((rj - r[None]) / fd[:, None]).T  # (n + 2, 5)
-                w = np.concatenate(
-                    [huber_weights(r[:n], cfg.huber, prob.robust), np.ones(len(r) - n)]
-                )
-                h = jac.T @ (w[:, None] * jac) + p_u_inv
-                g = jac.T @ (w * r) + p_u_inv @ (u - u_prior)
-                moved, previous = False, cost
-                for _ in range(4):
-                    step = np.linalg.solve(h + lam * np.diag(np.diagonal(h)), -g)
-                    step *= min(1.0, cfg.max_step / max(np.max(np.abs(step)), 1e-300))
-                    trial = u + step
-                    rt = prob.residuals(trial[None])[0]
-                    report(1)
-                    ct = costs(rt[None], trial[None])[0]
-                    if ct < cost:
-                        u, r, cost, lam = trial, rt, ct, max(lam / 3.0, 1e-6)
-                        moved = True
-                        break
-                    lam *= 4.0
-                if (
-                    not moved
-                    or np.max(np.abs(step)) < cfg.step_tolerance
-                    or previous - cost < cfg.cost_tolerance
-                ):
-                    break
-            return u, r, cost, reduced_chi2(r[:n])
 
-        best = None
-        refined = 0
-        for idx in order[: cfg.refine_starts]:
-            refined += 1
-            fit = refine(starts[idx].copy(), res[idx])
-            if best is None or fit[2] < best[2]:
-                best = fit
-            if best[3] <= cfg.restart_chi2:
-                break
-        coarse = False
-        if not noise_unknown and best[3] > cfg.restart_chi2 and cfg.coarse_pose_factor > 1.0:
-            # a fit still poor after every start is usually caught where the pose misfit's
-            # landscape is rough (a disc's spin, a CoM near an edge): descend once more with
-            # the pose track weighted as if `coarse_pose_factor` times noisier (a smoother
-            # landscape led by the force), then refine under the true weights from there.
-            # (Without a noise level, χ² is not yet a measure of fit.)
-            true_sigmas = prob.sigmas.copy()
-            prob.sigmas[[2, 3, 4]] *= cfg.coarse_pose_factor
-            r_c = prob.residuals(best[0][None])[0]
-            report(1)
-            u_c, *_ = refine(best[0].copy(), r_c)
-            prob.sigmas = true_sigmas
-            r_c = prob.residuals(u_c[None])[0]
-            report(1)
-            fit = refine(u_c, r_c)
-            if fit[2] < best[2]:
-                best, coarse = fit, True
-        u, r, cost, chi2 = best
-        poor, raised = False, np.ones(5)  # raised: the poor-fit rule's factors on the noise
-        if noise_unknown:
-            # the recording has no noise level: each channel group's noise is its misfit at
-            # the optimum (force, position, angle), and the fit is refined once under it
-            prob.sigmas *= misfit_noise_scale(r[:n].reshape(-1, 5), prob.push_lengths)
-            u, r, cost, chi2 = refine(u, prob.residuals(u[None])[0])
-        elif cfg.poor_fit_rule and chi2 > cfg.restart_chi2:
-            # the replay cannot bring the misfit to the noise level: model error or a local
-            # optimum the noise model leaves out. As for a recording without a noise level,
-            # each channel group's noise is raised to its misfit, counted by its effective
-            # number of samples (a systematic misfit runs in long correlated stretches)
-            poor = True
-            raised = np.maximum(misfit_noise_scale(r[:n].reshape(-1, 5), prob.push_lengths), 1.0)
-            prob.sigmas *= raised
-            r = np.concatenate([(r[:n].reshape(-1, 5) / raised).reshape(-1), r[n:]])
-            cost = costs(r[None], u[None])[0]
-            chi2 = reduced_chi2(r[:n])
-
-        # ---- Laplace at the optimum, combined with the prior
-        probe = np.concatenate([u[None] + np.diag(fd), u[None] - np.diag(fd)])
-        rj = prob.residuals(probe)
-        report(10)
-        jac = ((rj[:5] - rj[5:]) / (2 * fd[:, None])).T  # central differences
-        w = np.concatenate([huber_weights(r[:n], cfg.huber, prob.robust), np.ones(len(r) - n)])
-        # one Gauss–Newton polish with the central Jacobian; the optimum is known only to
-        # within this last step, so its outer product joins the covariance below
-        h_full = jac.T @ (w[:, None] * jac) + p_u_inv
-        newton = np.linalg.solve(h_full, -(jac.T @ (w * r) + p_u_inv @ (u - u_prior)))
-        newton *= min(1.0, cfg.max_step / max(np.max(np.abs(newton)), 1e-300))
-        trial = u + newton
-        rt = prob.residuals(trial[None])[0]
-        report(1)
-        if costs(rt[None], trial[None])[0] < cost:
-            u, r = trial, rt
-            chi2 = reduced_chi2(r[:n])
-        # χ² under the noise the fit was given (before a poor fit's noise was raised)
-        fit_chi2 = reduced_chi2(r[:n].reshape(-1, 5) * raised)
-        h_data = jac.T @ (w[:, None] * jac) * (1.0 / max(1.0, chi2))
-        if quasi_static or poor:
-            # quasi-static pushes reveal neither m at fixed μ·m nor I_z (docs/DESIGN.md §10):
-            # the curvature there comes from contact transients the replay reproduces only to
-            # within the start pose's noise, so it is dropped and those stay at the prior's
-            # width. A poor fit's m and I_z (read from accelerations and spin-downs it does
-            # not reproduce) are as far off as its misfit allows, so they keep it too.
-            h_data = without_blind(h_data)
-        cov_u, lam_d, vecs, flat = laplace_posterior(
-            h_data, newton, p_u, cfg.flat_information, cfg.information_scale
+def posterior(problem: FitProblem, fit: Optimum) -> Posterior:
+    """The intervals stage: a Gauss–Newton polish with the central-difference Jacobian, the
+    Laplace posterior there combined with the prior (`laplace_posterior`; the blind directions
+    of a quasi-static or poor fit dropped, flat directions at the prior's width and estimate),
+    the floors on the CoM and I_z, and, without a noise level and with ≥ 3 pushes, the
+    leave-one-push-out jackknife covariance."""
+    cfg, prob, objective = problem.config, problem.residuals, problem.objective
+    prob.sigmas = fit.sigmas.copy()  # the noise the optimum was weighed by
+    n = prob.n_data
+    u_prior, p_u, chol = problem.prior_u, problem.prior_cov_u, problem.prior_chol
+    u, r, chi2 = fit.u, fit.r, fit.chi2
+    fd = np.asarray(cfg.fd_steps, dtype=np.float64)
+    jac = central_jacobian(prob.residuals, u, fd)
+    problem.replayed(2 * len(fd))
+    w = objective.weights(r)
+    # one Gauss–Newton polish with the central Jacobian; the optimum is known only to
+    # within this last step, so its outer product joins the covariance below
+    h_full, grad = objective.normal_equations(jac, r, u)
+    newton = clip_step(np.linalg.solve(h_full, -grad), cfg.max_step)
+    trial = u + newton
+    rt = prob.residuals(trial[None])[0]
+    problem.replayed(1)
+    if objective.cost(rt, trial) < fit.cost:
+        u, r = trial, rt
+        chi2 = problem.reduced_chi2(r[:n])
+    # χ² under the noise the fit was given (before a poor fit's noise was raised)
+    fit_chi2 = problem.reduced_chi2(r[:n].reshape(-1, 5) * fit.raised)
+    h_data = jac.T @ (w[:, None] * jac) * (1.0 / max(1.0, chi2))
+    if problem.quasi_static or fit.poor:
+        # quasi-static pushes reveal neither m at fixed μ·m nor I_z (docs/DESIGN.md §10):
+        # the curvature there comes from contact transients the replay reproduces only to
+        # within the start pose's noise, so it is dropped and those stay at the prior's
+        # width. A poor fit's m and I_z (read from accelerations and spin-downs it does
+        # not reproduce) are as far off as its misfit allows, so they keep it too.
+        h_data = without_blind(h_data)
+    cov_u, lam_d, vecs, flat = laplace_posterior(
+        h_data, newton, p_u, cfg.flat_information, cfg.information_scale
+    )
+    # along a direction the pushes do not reveal, the estimate is the prior's (given the
+    # identified coordinates), as the information dropped there would have it
+    fit_log_mass = u[1]
+    w_u = np.linalg.solve(chol, u - u_prior)
+    for j in np.where(flat)[0]:
+        w_u -= vecs[:, j] * float(vecs[:, j] @ w_u)
+    u = u_prior + chol @ w_u
+    if fit.poor and not problem.quasi_static:
+        # a poor fit keeps its own m at fixed μ·m, read from the force of accelerating
+        # pushes that it still matches roughly (the prior's width says how little it is
+        # worth); its I_z, read from spin-downs it does not reproduce (up to 13 times off
+        # on validation objects), is the prior's
+        u[1] = fit_log_mass
+    t_inv = np.linalg.inv(problem.transform)
+    z_map = t_inv @ u
+    cov_z = t_inv @ cov_u @ t_inv.T
+    cov_z = 0.5 * (cov_z + cov_z.T)
+    com = [PARAM_NAMES.index("com_x"), PARAM_NAMES.index("com_y")]
+    cov_z[com, com] += (cfg.com_floor / space_scale()[com]) ** 2
+    i_iz = PARAM_NAMES.index("inertia")
+    cov_z[i_iz, i_iz] += (cfg.inertia_floor / space_scale()[i_iz]) ** 2
+    unidentified = tuple(_describe(t_inv @ chol @ vecs[:, j]) for j in np.where(flat)[0])
+    spread = None
+    records = problem.records
+    if problem.noise_unknown and cfg.between_push_check and len(records) >= 3:
+        # the pushes' disagreement is model error the misfit's noise level cannot show:
+        # the jackknife covariance of leave-one-push-out fits joins the posterior's
+        quiet = cfg.model_copy(update={"between_push_check": False})
+        loo = np.stack(
+            [
+                identify(
+                    [rec for j, rec in enumerate(records) if j != i],
+                    problem.scene,
+                    quiet,
+                    problem.seed,
+                    problem.progress,
+                    problem.pool,
+                ).mean_norm
+                for i in range(len(records))
+            ]
         )
-        # along a direction the pushes do not reveal, the estimate is the prior's (given the
-        # identified coordinates), as the information dropped there would have it
-        fit_log_mass = u[1]
-        w_u = np.linalg.solve(chol, u - u_prior)
-        for j in np.where(flat)[0]:
-            w_u -= vecs[:, j] * float(vecs[:, j] @ w_u)
-        u = u_prior + chol @ w_u
-        if poor and not quasi_static:
-            # a poor fit keeps its own m at fixed μ·m, read from the force of accelerating
-            # pushes that it still matches roughly (the prior's width says how little it is
-            # worth); its I_z, read from spin-downs it does not reproduce (up to 13 times off
-            # on validation objects), is the prior's
-            u[1] = fit_log_mass
-        t_inv = np.linalg.inv(tmat)
-        z_map = t_inv @ u
-        cov_z = t_inv @ cov_u @ t_inv.T
-        cov_z = 0.5 * (cov_z + cov_z.T)
-        com = [PARAM_NAMES.index("com_x"), PARAM_NAMES.index("com_y")]
-        cov_z[com, com] += (cfg.com_floor / space_scale()[com]) ** 2
-        i_iz = PARAM_NAMES.index("inertia")
-        cov_z[i_iz, i_iz] += (cfg.inertia_floor / space_scale()[i_iz]) ** 2
-        unidentified = tuple(_describe(t_inv @ chol @ vecs[:, j]) for j in np.where(flat)[0])
-        spread = None
-        if noise_unknown and cfg.between_push_check and len(records) >= 3:
-            # the pushes' disagreement is model error the misfit's noise level cannot show:
-            # the jackknife covariance of leave-one-push-out fits joins the posterior's
-            quiet = cfg.model_copy(update={"between_push_check": False})
-            loo = np.stack(
-                [
-                    identify(
-                        [rec for j, rec in enumerate(records) if j != i],
-                        scene,
-                        quiet,
-                        seed,
-                        progress,
-                        pool,
-                    ).mean_norm
-                    for i in range(len(records))
-                ]
-            )
-            k = len(records)
-            dev = loo - loo.mean(axis=0)
-            spread = (k - 1) / k * dev.T @ dev
-            cov_z = cov_z + spread
-    finally:
-        if own_pool:
-            pool.close()
+        k = len(records)
+        dev = loo - loo.mean(axis=0)
+        spread = (k - 1) / k * dev.T @ dev
+        cov_z = cov_z + spread
+    return Posterior(z_map, cov_z, chi2, fit_chi2, h_data, newton, lam_d, unidentified, spread)
 
+
+def report(
+    problem: FitProblem, starts: Starts, fit: Optimum, post: Posterior, started: float
+) -> Identification:
+    """The report stage: the posterior's SI summaries in the record's object frame (the CoM
+    truncated to where a CoM can lie, `common.estimate`), μ·m, the notes, as an
+    `Identification`; `started`: `time.perf_counter()` when the fit began."""
+    scene, pool = problem.scene, problem.pool
+    footprint = scene.footprint
+    z_map, cov_z = post.mean_z, post.cov_z
     # ---- SI summaries, the CoM in the record's object frame
     estimate = feasible(denormalise_params(z_map), footprint)[0]
     dx, dy = scene.frame_offset
@@ -595,28 +711,72 @@ def identify(
     wv[[0, 1]] = s[[0, 1]]
     log_pm = float(np.log(denormalise_params(z_map)[0] * denormalise_params(z_map)[1]))
     sd_pm = float(np.sqrt(max(wv @ cov_z @ wv, 0.0)))
+    notes = _notes(problem, starts, fit, post, belief)
+    tracks = problem.tracks
+    return Identification(
+        mean=mean,
+        std=std,
+        estimate=estimate,
+        lower=lower,
+        upper=upper,
+        mean_norm=z_map,
+        cov_norm=cov_z,
+        mu_m=pm,
+        mu_m_std=ps,
+        mu_m_interval=(float(np.exp(log_pm - q * sd_pm)), float(np.exp(log_pm + q * sd_pm))),
+        unidentified=post.unidentified,
+        information=post.information[::-1].copy(),
+        chi2=post.fit_chi2,
+        rollouts=pool.rollouts - problem.rollouts_before,
+        push_rollouts=pool.push_rollouts - problem.push_rollouts_before,
+        iterations=fit.iterations,
+        starts=fit.starts,
+        seconds=time.perf_counter() - started,
+        pushes=len(tracks),
+        profiles=tuple(sorted({t.push.profile for t in tracks})),
+        notes=tuple(notes),
+        data_information=post.data_information,
+        last_step=post.last_step,
+        noise=fit.sigmas[[0, 2, 4]].copy(),
+        noise_estimated=problem.noise_unknown,
+        poor_fit=fit.poor,
+        coarse_stage=fit.coarse,
+        belief=belief,
+    )
+
+
+def _notes(
+    problem: FitProblem,
+    starts: Starts,
+    fit: Optimum,
+    post: Posterior,
+    belief: ParameterEstimate,
+) -> list[str]:
+    """The report's notes: a poor fit, a noise level from the misfit, a truncated CoM, the
+    jackknife's widening, pushes that leave m and I_z at the prior."""
+    cfg, raised, sigmas = problem.config, fit.raised, fit.sigmas
     notes = []
-    if poor:
+    if fit.poor:
         notes.append(
-            f"the fit stays poor (reduced χ² {fit_chi2:.2f} > {cfg.restart_chi2} after "
-            f"{refined} start(s)"
-            + (" and a coarse-to-fine descent" if coarse else "")
+            f"the fit stays poor (reduced χ² {post.fit_chi2:.2f} > {cfg.restart_chi2} after "
+            f"{fit.starts} start(s)"
+            + (" and a coarse-to-fine descent" if fit.coarse else "")
             + "): a local minimum, or pushes the replay cannot reproduce. Each channel's noise "
             "is raised to its misfit counted by its effective number of samples (force ×"
             f"{raised[0]:.1f}, position ×{raised[2]:.1f}, angle ×{raised[4]:.1f}); m at fixed "
             "μ·m keeps the fit's estimate at the prior's width, I_z the prior's"
         )
-    elif chi2 > cfg.restart_chi2:
+    elif post.chi2 > cfg.restart_chi2:
         notes.append(
-            f"the fit stays poor (reduced χ² {chi2:.2f} > {cfg.restart_chi2}): the "
+            f"the fit stays poor (reduced χ² {post.chi2:.2f} > {cfg.restart_chi2}): the "
             "intervals are widened by √χ² only and may be too narrow"
         )
-    if noise_unknown:
+    if problem.noise_unknown:
         notes.append(
             "the recording has no noise level (real data): each channel's noise is its "
             "misfit at the optimum, counted by its effective number of samples (force "
-            f"{prob.sigmas[0]:.3g} N, position {prob.sigmas[2] * 1e3:.3g} mm, angle "
-            f"{np.degrees(prob.sigmas[4]):.3g}°), so "
+            f"{sigmas[0]:.3g} N, position {sigmas[2] * 1e3:.3g} mm, angle "
+            f"{np.degrees(sigmas[4]):.3g}°), so "
             "model error counts as noise and widens the intervals"
         )
     if belief.com is not None and belief.com.mass < COM_NOTE_MASS:
@@ -632,52 +792,57 @@ def identify(
                 else ""
             )
         )
-    if spread is not None:
-        widened = np.sqrt(np.diagonal(cov_z) / np.maximum(np.diagonal(cov_z - spread), 1e-300))
+    if post.spread is not None:
+        cov_z = post.cov_z
+        widened = np.sqrt(np.diagonal(cov_z) / np.maximum(np.diagonal(cov_z - post.spread), 1e-300))
         notes.append(
             "leave-one-push-out fits disagree: their jackknife covariance is added (std "
             + ", ".join(f"{n} ×{f:.1f}" for n, f in zip(PARAM_NAMES, widened))
             + ")"
         )
-    if quasi_static:
+    if problem.quasi_static:
         notes.append(
             "quasi-static pushes only (constant, ≤ "
             f"{QUASI_STATIC_SPEED:g} m/s): m and μ separate only through dynamic content "
             "(acceleration, free slide) and I_z does not enter, so m at fixed μ·m and I_z keep "
             "the prior's width; μ·m and the CoM are identified"
         )
-    elif cf["mass"] is None:
+    elif starts.closed_form["mass"] is None:
         notes.append(
             "no release push: m and μ separate only through dynamic content (acceleration, "
             "free slide), so constant pushes leave them at the prior except for μ·m"
         )
-    return Identification(
-        mean=mean,
-        std=std,
-        estimate=estimate,
-        lower=lower,
-        upper=upper,
-        mean_norm=z_map,
-        cov_norm=cov_z,
-        mu_m=pm,
-        mu_m_std=ps,
-        mu_m_interval=(float(np.exp(log_pm - q * sd_pm)), float(np.exp(log_pm + q * sd_pm))),
-        unidentified=unidentified,
-        information=lam_d[::-1].copy(),
-        chi2=fit_chi2,
-        rollouts=pool.rollouts - start_rollouts,
-        push_rollouts=pool.push_rollouts - start_push,
-        iterations=iterations,
-        starts=refined,
-        seconds=time.perf_counter() - t0,
-        pushes=len(tracks),
-        profiles=tuple(sorted({t.push.profile for t in tracks})),
-        notes=tuple(notes),
-        data_information=h_data,
-        last_step=newton,
-        noise=prob.sigmas[[0, 2, 4]].copy(),
-        noise_estimated=noise_unknown,
-        poor_fit=poor,
-        coarse_stage=coarse,
-        belief=belief,
-    )
+    return notes
+
+
+def identify(
+    records: Sequence[PushRecord],
+    scene: ReplayScene,
+    config: IdentifyConfig | None = None,
+    seed: int = 0,
+    progress: Callable[[int], None] | None = None,
+    pool: RolloutPool | None = None,
+) -> Identification:
+    """Fit φ to recorded pushes of one object by replaying them in the testbed's scene.
+
+    records: the object's pushes (K, each T samples); scene: its footprint and the simulation
+    settings the pushes were recorded with. progress(n) is called with the number of candidate
+    φ replayed after every batch. Same inputs and seed, same result (any number of workers).
+    Stages: `fit_problem` (residuals) → `fit_starts` → `optimise` → `posterior` (intervals) →
+    `report`.
+    """
+    cfg = config or IdentifyConfig()
+    started = time.perf_counter()
+    check_testbed_version(scene.sim_config, "the pushes")
+    tracks = tracks_from_records(records, scene.sim_config)
+    own_pool = pool is None
+    pool = pool or RolloutPool(cfg.workers)
+    try:
+        problem = fit_problem(records, tracks, scene, cfg, seed, pool, progress)
+        starts = fit_starts(problem)
+        fit = optimise(problem, starts)
+        post = posterior(problem, fit)
+    finally:
+        if own_pool:
+            pool.close()
+    return report(problem, starts, fit, post, started)

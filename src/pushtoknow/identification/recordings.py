@@ -1,22 +1,29 @@
 """Recorded pushes to identify from, read from the project's dataset format
-(`datasets.shards`), and the footprint to identify with: the one stored with the pushes, one
-given, or one estimated from the first image's mask S_0 and the camera model."""
+(`datasets.shards`), a recording file (`datasets.recording`) or a ROS 2 bag / MCAP file
+(`datasets.mcap_reader`), and the footprint to identify with: the one stored with the pushes,
+one given, or one estimated from the first image's mask S_0 and the camera model."""
 
 from __future__ import annotations
 
 import json
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import yaml
 
+from pushtoknow.common.config import read_utf8
 from pushtoknow.common.errors import DatasetError, IdentificationError, ObjectSpecError
 from pushtoknow.identification.replay import ReplayScene
 from pushtoknow.testbed.config import SimConfig, stored_sim_config
 from pushtoknow.testbed.objects import NOVEL_SHAPES, recentred_legacy_shape, resolve_shape
 from pushtoknow.testbed.shapes import CATALOGUE_SHAPES, footprint_from_shape
 from pushtoknow.testbed.sim import PushRecord
+
+if TYPE_CHECKING:
+    from pushtoknow.datasets.mcap_reader import BagOptions
+    from pushtoknow.datasets.recording import RecordingMeta
 
 MASK_SIMPLIFY = 5e-4  # m: tolerance of the polygon simplification of a mask's contour
 
@@ -25,8 +32,10 @@ MASK_SIMPLIFY = 5e-4  # m: tolerance of the polygon simplification of a mask's c
 class RecordedObject:
     """One object's recorded pushes. shape: the footprint stored with them (object frame);
     height (m); truth (5,) SI: the parameters stored with them (the simulator's truth; a
-    recording of a real object stores its catalogue values) or None; sim_config: the settings
-    the pushes were recorded with."""
+    recording of a real object stores its catalogue values; NaN where a recording does not
+    know one) or None; sim_config: the settings the pushes were recorded with (for a recording
+    or bag: the testbed's, with its clock, pad radius, force noise and push length); notes:
+    what the reader changed (a resampling, a moved object frame)."""
 
     name: str
     index: int
@@ -35,6 +44,7 @@ class RecordedObject:
     truth: np.ndarray | None
     records: tuple[PushRecord, ...]
     sim_config: SimConfig
+    notes: tuple[str, ...] = ()
 
 
 def _shard_paths(path: Path) -> list[Path]:
@@ -79,12 +89,82 @@ def recorded_clock(sim_config: SimConfig, time_scales, where: str) -> SimConfig:
     return sim_config.model_copy(update={"tactile": tactile})
 
 
-def load_recorded_objects(path: Path) -> list[RecordedObject]:
+def _fits_physics(rate: float, sim_config: SimConfig) -> bool:
+    """Whether a sample period 1 / rate is a whole number of the testbed's physics steps."""
+    steps = 1.0 / (rate * sim_config.physics.timestep)
+    return abs(steps - round(steps)) < 1e-6 and round(steps) >= 1
+
+
+def recording_object(path: Path, meta: RecordingMeta, records: list[PushRecord]) -> RecordedObject:
+    """The object of a recording or bag read as (meta, records). Its settings are the
+    testbed's with the recording's clock (meta.rate), pad radius and force noise (0: unknown),
+    and a push length (horizon) that fits the pushes `identify` replays with their speed
+    profile; those must share one length (IdentificationError naming the push otherwise)."""
+
+    base = SimConfig()
+    rate = float(meta.rate)
+    if not _fits_physics(rate, base):
+        raise IdentificationError(
+            f"{path}: a {rate:g} Hz clock is not a whole number of {base.physics.timestep} s "
+            "physics steps; resample it (e.g. rate 10 Hz)"
+        )
+
+    def settings(samples: int) -> SimConfig:
+        return base.model_copy(
+            update={
+                "pad": base.pad.model_copy(update={"radius": float(meta.pusher_radius)}),
+                "tactile": base.tactile.model_copy(
+                    update={"rate_hz": rate, "force_noise_std": float(meta.force_noise_std or 0.0)}
+                ),
+                "push": base.push.model_copy(update={"horizon": (samples - 1) / rate}),
+            }
+        )
+
+    # the longest push sets the horizon: a push following its profile over it is replayed with
+    # the profile, any other along its recorded pad track (`fit.tracks_from_records`)
+    sim = settings(max(len(r.time) for r in records))
+    truth = np.asarray(meta.truth, dtype=np.float64)
+    shape = None
+    if meta.outline is not None:
+        shape = {"type": "polygon", "vertices": np.asarray(meta.outline).tolist()}
+    return RecordedObject(
+        name=meta.name,
+        index=0,
+        shape=shape,
+        height=float(meta.height),
+        truth=None if np.isnan(truth).all() else truth,
+        records=tuple(records),
+        sim_config=sim,
+        notes=meta.notes,
+    )
+
+
+def load_recorded_objects(
+    path: Path, bag: BagOptions | None = None, images: bool = False
+) -> list[RecordedObject]:
     """Every object of a dataset directory (or one shard file), pushes without images (S_0
-    kept). Raises DatasetError / IdentificationError naming the problem."""
+    kept) unless `images`; or the one object of a recording file (`datasets.recording`; its
+    clock resampled to the testbed's 10 Hz, with a note, when its period is not a whole number
+    of physics steps) or of a ROS 2 bag / MCAP file (`datasets.mcap_reader`, mapped by `bag`,
+    default topics without). Raises DatasetError / IdentificationError naming the problem."""
+    from pushtoknow.datasets.mcap_reader import is_bag, read_bag
     from pushtoknow.datasets.mit_import import TIME_SCALE_ATTR
+    from pushtoknow.datasets.recording import is_recording, read_recording
     from pushtoknow.datasets.shards import open_shard, read_push
 
+    path = Path(path)
+    if is_bag(path):
+        return [recording_object(path, *read_bag(path, bag))]
+    if bag is not None:
+        raise IdentificationError(
+            f"--pushes {path}: topic options apply to ROS 2 bags and MCAP files only"
+        )
+    if is_recording(path):
+        meta, records = read_recording(path, images=images)
+        if not _fits_physics(float(meta.rate), SimConfig()):
+            rate = SimConfig().tactile.rate_hz
+            meta, records = read_recording(path, rate=rate, images=images)
+        return [recording_object(path, meta, records)]
     out = []
     for shard in _shard_paths(path):
         with open_shard(shard) as f:
@@ -102,7 +182,7 @@ def load_recorded_objects(path: Path) -> list[RecordedObject]:
                     np.asarray(g.attrs["params"], dtype=np.float64) if "params" in g.attrs else None
                 )
                 keys = sorted(pushes, key=int)
-                records = tuple(read_push(shard, pushes[k], images=False) for k in keys)
+                records = tuple(read_push(shard, pushes[k], images=images) for k in keys)
                 scales = [float(pushes[k].attrs.get(TIME_SCALE_ATTR, 1.0)) for k in keys]
                 shape = d.get("shape")
                 out.append(
@@ -145,9 +225,11 @@ def parse_shape(text: str) -> dict:
                     f"{', '.join([*CATALOGUE_SHAPES, *NOVEL_SHAPES])}; or dataset, from-mask)"
                 )
             try:
-                data = yaml.safe_load(p.read_text())
+                data = yaml.safe_load(read_utf8(p))
             except yaml.YAMLError as e:
                 raise IdentificationError(f"--shape {text}: not valid JSON/YAML ({e})") from None
+            except ValueError as e:  # not UTF-8 text
+                raise IdentificationError(f"--shape {text}: {e}") from None
         if isinstance(data, dict) and "shape" in data:
             data = data["shape"]
         shape = resolve_shape(data) if isinstance(data, str) else data

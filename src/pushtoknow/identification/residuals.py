@@ -4,9 +4,12 @@ what `fit.identify` and the physics filter (`recursive.iterated_update`) minimis
 from __future__ import annotations
 
 import dataclasses
+import math
+from collections.abc import Sequence
 
 import numpy as np
 
+from pushtoknow.common.angles import wrap_angle
 from pushtoknow.common.params import denormalise_params
 from pushtoknow.identification.prior import fit_transform
 from pushtoknow.identification.replay import PushTrack, ReplayScene, RolloutPool, feasible
@@ -15,13 +18,55 @@ PENALTY_SCALE = 1e-3  # m of CoM projection (or 0.1 % of I_z excess) per unit pe
 OFFSET_UNIT = 1e-3  # m per unit of a push's contact offset coordinate
 
 
+def rest_weights(pose: np.ndarray, position_tol: float, angle_tol: float) -> np.ndarray:
+    """(T,) weights of a pose track's (T, 3) samples that keep one sample of its final stretch
+    at rest (every sample within `position_tol` (m) and `angle_tol` (rad) of the last): 0 on
+    the stretch's samples after its first, 1 elsewhere. A resting object is seen in the same
+    image over and over, so its perceived pose carries one error, not one per frame."""
+    pose = np.asarray(pose, dtype=np.float64)
+    near = (np.linalg.norm(pose[:, :2] - pose[-1, :2], axis=1) <= position_tol) & (
+        np.abs(wrap_angle(pose[:, 2] - pose[-1, 2])) <= angle_tol
+    )
+    moving = np.flatnonzero(~near)
+    first_rest = int(moving[-1]) + 1 if len(moving) else 0
+    w = np.ones(len(pose))
+    w[first_rest + 1 :] = 0.0
+    return w
+
+
+def whiten_ar1(e: np.ndarray, rho: float, lengths: Sequence[int]) -> np.ndarray:
+    """Residuals e (..., N, C) of AR(1) errors (lag-1 correlation `rho` within each track of
+    `lengths` samples, unit marginal variance) as independent unit-variance ones: the first
+    sample of a track kept, each later one (e_t − ρ e_{t−1}) / √(1 − ρ²). ρ = 0: unchanged."""
+    if rho == 0.0:
+        return e
+    out = e.copy()
+    start = 0
+    for n in lengths:
+        seg = e[..., start : start + n, :]
+        out[..., start + 1 : start + n, :] = (seg[..., 1:, :] - rho * seg[..., :-1, :]) / (
+            math.sqrt(1.0 - rho * rho)
+        )
+        start += n
+    return out
+
+
 class ReplayResiduals:
     """Residuals of candidate fit coordinates u (B, 5) on `tracks`, in noise units `sigmas`
     (5,): force x, y (N), x, y (m), θ (rad); the last two entries are the feasibility penalties
-    (`replay.feasible`)."""
+    (`replay.feasible`). The force's noise is white; the pose track's may be AR(1) with lag-1
+    correlation `pose_correlation` (perception's error drifts from frame to frame), its
+    residuals whitened (`whiten_ar1`). `rest_tolerance` (m, rad): keep one pose sample of each
+    observed track's final stretch at rest (`rest_weights`); None: every sample counts."""
 
     def __init__(
-        self, scene: ReplayScene, tracks: list[PushTrack], pool: RolloutPool, sigmas: np.ndarray
+        self,
+        scene: ReplayScene,
+        tracks: list[PushTrack],
+        pool: RolloutPool,
+        sigmas: np.ndarray,
+        rest_tolerance: tuple[float, float] | None = None,
+        pose_correlation: float = 0.0,
     ):
         self.scene, self.tracks, self.pool = scene, tracks, pool
         self.sigmas = np.array(sigmas, dtype=np.float64)  # a copy: a coarse stage scales it
@@ -30,9 +75,23 @@ class ReplayResiduals:
         self.obs = np.concatenate([np.column_stack([t.force, t.pose])[1:] for t in tracks])
         self.push_lengths = [len(t.pose) - 1 for t in tracks]
         self.n_data = self.obs.size
+        self.pose_correlation = float(pose_correlation)
+        self.weights = np.ones(self.obs.shape)  # (N, 5) per-sample weights of the residuals
+        if rest_tolerance is not None:
+            self.weights[:, 2:] = np.concatenate(
+                [rest_weights(t.pose, *rest_tolerance)[1:] for t in tracks]
+            )[:, None]
         robust = np.zeros(self.obs.shape, dtype=bool)
         robust[:, :2] = True
         self.robust = robust.reshape(-1)
+
+    def standardise(self, data: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:
+        """Replayed-minus-observed samples in noise units (..., N, 5) as independent
+        unit-variance residuals: the pose channels whitened, then weighted (default: the
+        observed tracks' `weights`)."""
+        out = data.copy()
+        out[..., 2:] = whiten_ar1(data[..., 2:], self.pose_correlation, self.push_lengths)
+        return out * (self.weights if weights is None else weights)
 
     def phi(self, u: np.ndarray) -> np.ndarray:
         """(B, 5) SI parameters of fit coordinates u (B, ≥ 5)."""
@@ -69,7 +128,7 @@ class ReplayResiduals:
         """(B, n_data + 2) residuals in noise units, the last two the feasibility penalties."""
         us = np.atleast_2d(us)
         sim = np.stack(self.simulate(us))
-        data = (sim - self.obs[None]) / self.sigmas
+        data = self.standardise((sim - self.obs[None]) / self.sigmas)
         return np.concatenate([data.reshape(len(us), -1), self._pen], axis=1)
 
 

@@ -29,8 +29,8 @@ from pydantic import Field
 from pushtoknow.active.selection import ScoreName
 from pushtoknow.common.config import Config
 from pushtoknow.common.estimate import ParameterEstimate, estimate_from_belief
-from pushtoknow.common.estimators import EstimatorName
-from pushtoknow.common.params import PARAM_NAMES
+from pushtoknow.common.estimators import DEFAULT_ESTIMATOR, EstimatorName
+from pushtoknow.common.params import MIN_SIGMA_POINTS, PARAM_NAMES
 from pushtoknow.common.policies import PolicyName
 from pushtoknow.testbed.config import SimConfig
 from pushtoknow.testbed.executor import View
@@ -46,10 +46,11 @@ class InferenceConfig(Config):
     pushes: int = Field(5, ge=1)
     policy: PolicyName = "uniform"
     estimator: EstimatorName = Field(
-        "vt-addf", description="the estimator: the learned dual filter or the physics filter"
+        DEFAULT_ESTIMATOR,
+        description="the estimator: the physics filter or the paper's learned dual filter",
     )
     candidates: int = Field(16, ge=1, description="affordances sampled per push decision")
-    num_sigma_points: int | None = Field(None, ge=10, description="None: the model's")
+    num_sigma_points: int | None = Field(None, ge=MIN_SIGMA_POINTS, description="None: the model's")
     init_pose_std: tuple[float, float, float] = Field(
         (0.002, 0.002, 0.03), description="pose std at a push's start (m, m, rad)"
     )
@@ -138,7 +139,8 @@ class InferenceResult:
     """prior: the belief before any push; estimates: one per push; truth: SI (K,) or None;
     records: the executed pushes; poses: the pose track each update used (T, 3);
     estimator: its name; seconds: wall time of each push's update (not in the JSON, which
-    the same seed makes identical)."""
+    the same seed makes identical); outline (V, 2) (m, object frame) and height (m): the
+    object as the estimator saw it (`Estimator.seen_object`), None before any push."""
 
     prior: PushEstimate
     estimates: list[PushEstimate]
@@ -148,11 +150,21 @@ class InferenceResult:
     object_name: str = ""
     estimator: str = ""
     seconds: list[float] = field(default_factory=list)
+    outline: np.ndarray | None = None
+    height: float | None = None
+
+    def add_seen(self, estimator: Estimator) -> None:
+        """Keep the outline and height `estimator` saw (`Estimator.seen_object`)."""
+        seen = estimator.seen_object()
+        if seen is not None:
+            self.outline, self.height = seen
 
     def to_json(self) -> dict:
         return {
             "object": self.object_name,
             "estimator": self.estimator,
+            "outline": None if self.outline is None else np.round(self.outline, 6).tolist(),
+            "height": self.height,
             "prior": {"estimate": self.prior.as_dict()},
             "pushes": [
                 {
@@ -193,9 +205,10 @@ class Estimator(ABC):
         `initial_pose` defines the object frame at the first push when given."""
 
     @abstractmethod
-    def update(self, record: PushRecord, view: View, pose0: np.ndarray) -> np.ndarray:
-        """The belief after the executed push `record` of the object seen in `view` at pose0.
-        Returns the pose track (T, 3) the update used."""
+    def update(self, record: PushRecord, view: View | None, pose0: np.ndarray) -> np.ndarray:
+        """The belief after the executed push `record` of the object seen in `view` at pose0
+        (None: a recording without images, its poses tracked). Returns the pose track (T, 3)
+        the update used."""
 
     @abstractmethod
     def information(
@@ -208,6 +221,11 @@ class Estimator(ABC):
     ) -> np.ndarray:
         """(C,) expected information of each candidate push under the current belief (higher
         is better; `active.selection` defines the scores)."""
+
+    @abstractmethod
+    def seen_object(self) -> tuple[np.ndarray, float] | None:
+        """The object as seen at the first push: its outline (V, 2) (m, in the object frame the
+        estimates use) and height (m); None before the first update."""
 
     def close(self) -> None:  # noqa: B027 - optional hook
         """Release what the estimator holds (worker processes)."""

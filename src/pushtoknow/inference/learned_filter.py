@@ -25,6 +25,7 @@ import torch
 
 from pushtoknow.active.policies import ActivePolicy
 from pushtoknow.active.selection import ScoreName
+from pushtoknow.common.errors import DatasetError
 from pushtoknow.common.estimate import com_region
 from pushtoknow.inference.estimator import (
     Estimator,
@@ -35,11 +36,11 @@ from pushtoknow.inference.estimator import (
 from pushtoknow.models.calibration import keep_evidence
 from pushtoknow.models.checkpoint import TrainedModel
 from pushtoknow.models.context import PushContext, with_pad_track
-from pushtoknow.perception.footprint import footprint_seen
+from pushtoknow.perception.footprint import footprint_seen, object_top
 from pushtoknow.perception.visnet import frames_as_tensors, start_pose, visnet_measure
 from pushtoknow.testbed.config import SimConfig
 from pushtoknow.testbed.executor import View
-from pushtoknow.testbed.objects import COM_MARGIN
+from pushtoknow.testbed.objects import COM_MARGIN, MIN_HEIGHT
 from pushtoknow.testbed.push import Push, pad_positions, release_points
 from pushtoknow.testbed.sim import PushRecord
 
@@ -72,6 +73,7 @@ class LearnedFilterEstimator(Estimator):
         self._prev: tuple[np.ndarray, np.ndarray] | None = None  # (S_0, pose0) of last push
         self._last_pose: np.ndarray | None = None
         self._footprint: torch.Tensor | None = None  # (V, 2) object frame, first push's S_0
+        self._height = 0.0  # m, the first push's depth
         self._pushes_of: Counter[str] = Counter()  # pushes filtered so far, per speed profile
 
     def start_belief(self, pose0: np.ndarray) -> tuple[torch.Tensor, torch.Tensor]:
@@ -99,6 +101,7 @@ class LearnedFilterEstimator(Estimator):
         fp = torch.as_tensor(fp, dtype=torch.float32)
         if self._footprint is None:  # the first push's view defines the object frame exactly;
             self._footprint = fp  # later ones depend on the estimated start θ
+            self._height = max(object_top(view.depth, view.s0, self.camera), MIN_HEIGHT)
         return PushContext(
             mask0=mask0,
             pose0=torch.as_tensor(pose0, dtype=torch.float32)[None].expand(b, -1),
@@ -123,15 +126,29 @@ class LearnedFilterEstimator(Estimator):
             region = com_region(self._footprint.numpy().astype(np.float64), COM_MARGIN)
         return belief_to_estimate(index, self.param_mean, self.param_cov, push, region)
 
+    def seen_object(self) -> tuple[np.ndarray, float] | None:
+        """The footprint seen at the first push (the filter's context) and the object's height
+        in that push's depth."""
+        if self._footprint is None:
+            return None
+        return self._footprint.numpy().astype(np.float64), self._height
+
     def start_pose(self, view: View, initial_pose: np.ndarray | None) -> np.ndarray:
         """pose0 of the next push (`perception.visnet.start_pose`)."""
         previous = None if self._prev is None else (*self._prev, self._last_pose)
         return start_pose(self.model.visnet, self.camera, view, initial_pose, previous)
 
     @torch.no_grad()
-    def update(self, record: PushRecord, view: View, pose0: np.ndarray) -> np.ndarray:
+    def update(self, record: PushRecord, view: View | None, pose0: np.ndarray) -> np.ndarray:
         """Run the filter over one executed push of the object seen in `view` before it;
-        updates the parameter belief. Returns the filtered pose means (T, 3)."""
+        updates the parameter belief. Returns the filtered pose means (T, 3). Raises
+        DatasetError for a push without images (the filter measures the pose with VisNet)."""
+        if view is None or record.rgb is None:
+            raise DatasetError(
+                "a push without images",
+                f"the learned filter ({self.name}) measures the pose in RGB-D frames; the "
+                "physics estimator runs on tracked poses",
+            )
         rec = record
         filt, cam = self.filter, self.camera
         mean, cov = self.start_belief(pose0)

@@ -6,10 +6,11 @@ footprint is traced on the first push's mask with its corners kept sharp
 (`perception.footprint.replay_outline`) and fixes the object frame; each push's
 pose track is VisNet's, frame by frame, each frame's reference pose the previous measurement.
 The parameter belief (a Gaussian over `identification.prior.fit_transform`'s coordinates,
-starting at the catalogue prior) is updated after each push by replaying it in the testbed's
-scene with that footprint (`identification.recursive.iterated_update`), carried to the next
-push. Active policies score candidates by the entropy the same update would remove, from
-replays of the candidates at the belief's mean (`identification.recursive.expected_information`).
+starting at the prior of the footprint seen, `identification.prior.footprint_prior`) is
+updated after each push by replaying it in the testbed's scene with that footprint
+(`identification.recursive.iterated_update`), carried to the next push. Active policies score
+candidates by the entropy the same update would remove, from replays of the candidates at the
+belief's mean (`identification.recursive.expected_information`).
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ import torch
 from shapely.geometry import Polygon
 
 from pushtoknow.active.selection import ScoreName
+from pushtoknow.common.errors import DatasetError
 from pushtoknow.common.estimate import com_region
 from pushtoknow.common.params import denormalise_params, normalise_params, space_scale
 from pushtoknow.identification.fit import (
@@ -79,7 +81,9 @@ def outline_shape(footprint: np.ndarray) -> tuple[dict, tuple[float, float]]:
 class PhysicsFilterEstimator(Estimator):
     """The simulator-in-the-loop dual filter on pushes of one object (module doc). `model`
     provides perception (VisNet, camera); `sim_config`: the testbed settings the pushes run
-    with; `seed` has nothing to draw (the update is deterministic)."""
+    with; `seed` has nothing to draw (the update is deterministic); `scene`: the object's
+    outline and height when known (a recording's), instead of the one traced in the first
+    view."""
 
     name = "physics"
 
@@ -90,6 +94,7 @@ class PhysicsFilterEstimator(Estimator):
         seed: int = 0,
         sim_config: SimConfig | None = None,
         filter_config: PhysicsFilterConfig | None = None,
+        scene: ReplayScene | None = None,
     ):
         self.model = model.eval()
         self.config = config
@@ -103,6 +108,8 @@ class PhysicsFilterEstimator(Estimator):
         self.cov = self.prior_cov = self.tmat @ p_z @ self.tmat.T
         self.scene: ReplayScene | None = None
         self.com_region: np.ndarray | None = None  # (V, 2) where the CoM can lie, scene frame
+        if scene is not None:
+            self._use_scene(scene)
         self.updates: list[PhysicsUpdate] = []
         self._pool: RolloutPool | None = None
         self._prev: tuple[np.ndarray, np.ndarray] | None = None  # (S_0, pose0) of last push
@@ -148,16 +155,28 @@ class PhysicsFilterEstimator(Estimator):
             region = self.com_region + np.asarray(self.scene.frame_offset)
         return belief_to_estimate(index, mean, cov, push, region)
 
-    def _scene(self, view: View, pose0: np.ndarray) -> ReplayScene:
+    def _scene(self, view: View | None, pose0: np.ndarray) -> ReplayScene:
         """The replay scene of the footprint seen in the first push's view (it fixes the
         object frame) at the height seen in its depth."""
         if self.scene is None:
+            if view is None:
+                raise DatasetError(
+                    "a push without images",
+                    "no outline given: the physics estimator needs the object's outline (a "
+                    "recording's, or one traced in an image)",
+                )
             fp = replay_outline(view.s0, view.depth, view.outline_mask, self.camera, pose0)
             height = max(object_top(view.depth, view.s0, self.camera), MIN_HEIGHT)
             shape, offset = outline_shape(fp)
-            self.scene = ReplayScene(shape, height, self.sim_config, offset)
-            self.com_region = com_region(self.scene.footprint.vertices, COM_MARGIN)
+            self._use_scene(ReplayScene(shape, height, self.sim_config, offset))
+        assert self.scene is not None
         return self.scene
+
+    def _use_scene(self, scene: ReplayScene) -> None:
+        """Replay pushes in `scene`; the prior becomes its footprint's."""
+        self.scene = dataclasses.replace(scene, sim_config=self.sim_config)
+        self.com_region = com_region(self.scene.footprint.vertices, COM_MARGIN)
+        self._prior_from_footprint(self.scene)
 
     def _prior_from_footprint(self, scene: ReplayScene) -> None:
         """The prior once the footprint is seen (`prior.footprint_prior`): the CoM anywhere
@@ -171,6 +190,13 @@ class PhysicsFilterEstimator(Estimator):
         )
         self.mean = self.tmat @ z
         self.cov = self.prior_cov = self.tmat @ p_z @ self.tmat.T
+
+    def seen_object(self) -> tuple[np.ndarray, float] | None:
+        """The outline the pushes are replayed with (`replay_outline`) and its height."""
+        if self.scene is None:
+            return None
+        verts = self.scene.footprint.vertices + np.asarray(self.scene.frame_offset)
+        return verts, float(self.scene.height)
 
     def start_pose(self, view: View, initial_pose: np.ndarray | None) -> np.ndarray:
         """pose0 of the next push (`perception.visnet.start_pose`)."""
@@ -188,19 +214,16 @@ class PhysicsFilterEstimator(Estimator):
             track.append(z[0])
         return np.stack(track)
 
-    def update(self, record: PushRecord, view: View, pose0: np.ndarray) -> np.ndarray:
+    def update(self, record: PushRecord, view: View | None, pose0: np.ndarray) -> np.ndarray:
         """The belief after the executed push (module doc); returns VisNet's pose track."""
         scene = self._scene(view, pose0)
-        if record.rgb is not None:
+        if record.rgb is not None and view is not None:
             poses = self.pose_track(record, view, pose0)
         else:  # a recording with tracked poses and no images
             poses = np.asarray(record.pose, dtype=np.float64)
         seen = dataclasses.replace(record, pose=poses)
         (track,) = tracks_from_records([seen], self.sim_config)
-        extra = []
-        if not self.updates:
-            self._prior_from_footprint(scene)
-            extra = self._closed_form_start(seen)
+        extra = self._closed_form_start(seen) if not self.updates else []
         up = iterated_update(
             self.mean,
             self.cov,
@@ -226,7 +249,8 @@ class PhysicsFilterEstimator(Estimator):
             up.iterations,
             ", poor fit" if up.poor_fit else "",
         )
-        self._prev = (view.s0, pose0)
+        if view is not None:
+            self._prev = (view.s0, pose0)
         self._last_pose = poses[-1]
         return poses
 

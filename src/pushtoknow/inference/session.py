@@ -13,10 +13,12 @@ each estimator seeds its own.
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 
 import numpy as np
 
 from pushtoknow.common.errors import UntrainedProfileError
+from pushtoknow.common.random import stream, stream_seed
 from pushtoknow.inference.estimator import (
     Estimator,
     InferenceConfig,
@@ -32,8 +34,9 @@ from pushtoknow.inference.policies import (
 )
 from pushtoknow.models.checkpoint import TrainedModel
 from pushtoknow.testbed.config import SimConfig
-from pushtoknow.testbed.executor import PushExecutor, SimulatedExecutor
+from pushtoknow.testbed.executor import PushExecutor, SimulatedExecutor, View
 from pushtoknow.testbed.objects import ObjectSpec
+from pushtoknow.testbed.sim import PushRecord
 
 
 def make_estimator(
@@ -84,13 +87,37 @@ def infer_object(
 
     `policy` chooses each push (default: `make_policy(config.policy)`); `estimator` carries
     the belief (default: `make_estimator(model, config, seed, sim_config)`, closed at the end);
-    `sim_config`: the testbed settings the executor runs pushes with (default: the model's)."""
+    `sim_config`: the testbed settings the executor runs pushes with (default: the model's).
+    Raises ArgumentTypeError / ArgumentValueError naming a wrong argument."""
+    from pushtoknow.common.arguments import (
+        check_callable,
+        check_instance,
+        check_seed,
+        check_sigma_points,
+        check_vector,
+    )
+
+    check_instance(model, TrainedModel, "model", hint="load one with pushtoknow.load_model()")
+    check_instance(executor, PushExecutor, "executor")
+    check_instance(config, InferenceConfig, "config", hint="build one: InferenceConfig(**settings)")
+    check_sigma_points(config.num_sigma_points, "config.num_sigma_points")
+    check_seed(seed)
+    check_vector(initial_pose, 3, "initial_pose")
+    check_vector(truth, 5, "truth", finite=False)
+    check_instance(object_name, str, "object_name")
+    check_callable(on_push, "on_push")
+    check_instance(
+        policy, PushPolicy, "policy", optional=True,
+        hint="to choose one by name, set InferenceConfig(policy=...)",
+    )  # fmt: skip
+    check_instance(sim_config, SimConfig, "sim_config", optional=True)
+    check_instance(estimator, Estimator, "estimator", optional=True)
     check_profiles(model, config)
     if policy is None:
         policy = make_policy(config.policy, config.active_horizon_fraction)
     own = estimator is None
-    est = estimator or make_estimator(model, config, seed, sim_config)
-    rng = np.random.default_rng(seed)  # candidates and policy
+    est = estimator or make_estimator(model, config, stream_seed(seed, "estimator"), sim_config)
+    rng = stream(seed, "policy")  # candidates and the policy's choices
     speeds = profile_speeds(sim_config or model.sim_config)
     camera = model.camera
     result = InferenceResult(est.estimate(0), [], truth, object_name=object_name)
@@ -120,24 +147,36 @@ def infer_object(
                 information,
             )
             push = policy.choose(decision)
-            rec = executor.execute(push)
-            t0 = time.perf_counter()
-            result.poses.append(est.update(rec, view, pose0))
-            result.seconds.append(time.perf_counter() - t0)
-            result.records.append(rec)
-            e = est.estimate(k + 1, push)
-            result.estimates.append(e)
-            if on_push is not None:
-                on_push(e)
+            _update(est, result, executor.execute(push), view, pose0, on_push)
+        result.add_seen(est)
     finally:
         if own:
             est.close()
     return result
 
 
+def _update(
+    est: Estimator,
+    result: InferenceResult,
+    rec: PushRecord,
+    view: View | None,
+    pose0: np.ndarray,
+    on_push,
+) -> None:
+    """The belief after the executed push `rec` (timed), its estimate appended to `result`."""
+    t0 = time.perf_counter()
+    result.poses.append(est.update(rec, view, pose0))
+    result.seconds.append(time.perf_counter() - t0)
+    result.records.append(rec)
+    e = est.estimate(len(result.estimates) + 1, rec.push)
+    result.estimates.append(e)
+    if on_push is not None:
+        on_push(e)
+
+
 def infer_simulated(
     model: TrainedModel,
-    spec: ObjectSpec,
+    spec: ObjectSpec | str,
     config: InferenceConfig = InferenceConfig(),
     seed: int = 0,
     with_truth: bool = True,
@@ -148,8 +187,21 @@ def infer_simulated(
     """`infer_object` on the testbed: `spec` simulated with the model's testbed settings,
     recentred under the camera, seeded by `seed`, the first push starting from its true pose
     (so the CoM and I_z compare with the truth, reported when `with_truth`); `estimator` as
-    `infer_object`'s."""
-    executor = SimulatedExecutor(spec, model.sim_config, seed=seed, recentre=True)
+    `infer_object`'s. `spec` may be a reference ("catalogue:117", "random:7:0", a spec file).
+    Raises ArgumentTypeError / ArgumentValueError naming a wrong argument."""
+    from pathlib import Path
+
+    from pushtoknow.common.arguments import check_instance, check_seed
+    from pushtoknow.testbed.object_refs import load_object_spec
+
+    check_instance(model, TrainedModel, "model", hint="load one with pushtoknow.load_model()")
+    if isinstance(spec, (str, Path)):
+        spec = load_object_spec(spec)
+    check_instance(spec, ObjectSpec, "spec", hint="or a reference such as 'catalogue:117'")
+    check_seed(seed)
+    check_instance(with_truth, bool, "with_truth")
+    sim_seed = stream_seed(seed, "simulator")
+    executor = SimulatedExecutor(spec, model.sim_config, seed=sim_seed, recentre=True)
     try:
         return infer_object(
             model,
@@ -165,3 +217,34 @@ def infer_simulated(
         )
     finally:
         executor.close()
+
+
+def infer_recorded(
+    model: TrainedModel,
+    records: Sequence[PushRecord],
+    config: InferenceConfig = InferenceConfig(),
+    seed: int = 0,
+    truth: np.ndarray | None = None,
+    object_name: str = "",
+    on_push=None,
+    estimator: Estimator | None = None,
+    sim_config: SimConfig | None = None,
+) -> InferenceResult:
+    """The estimator over recorded pushes, in their order (a recording cannot be re-pushed:
+    nothing is chosen, `config.pushes` and the policy are unused). Each push starts at its
+    recorded (tracked) pose; a record without images (tracked poses only) needs an estimator
+    that does without them (`PhysicsFilterEstimator` given the recording's outline).
+    `sim_config`: the settings the pushes were recorded with (default: the model's)."""
+    own = estimator is None
+    est = estimator or make_estimator(model, config, stream_seed(seed, "estimator"), sim_config)
+    result = InferenceResult(est.estimate(0), [], truth, object_name=object_name)
+    result.estimator = est.name
+    try:
+        for rec in records:
+            view = View.before(rec) if rec.rgb is not None else None
+            _update(est, result, rec, view, np.asarray(rec.pose[0], dtype=np.float64), on_push)
+        result.add_seen(est)
+    finally:
+        if own:
+            est.close()
+    return result

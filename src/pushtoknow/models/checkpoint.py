@@ -17,10 +17,11 @@ from typing import Literal
 import torch
 from pydantic import Field, field_validator
 
-import pushtoknow
 from pushtoknow.common.camera import CameraModel
 from pushtoknow.common.config import Config
 from pushtoknow.common.errors import CheckpointError, first_line
+from pushtoknow.common.params import MIN_SIGMA_POINTS
+from pushtoknow.common.version import __version__
 from pushtoknow.filters.base import BeliefFilter, FilterConfig
 from pushtoknow.filters.gaussian import symmetrize
 from pushtoknow.models.calibration import check_correlations, evidence_discount
@@ -113,7 +114,7 @@ class InferenceSettings(Config):
     dynamic_noise_scale: float | None = Field(
         None, gt=0, description="factor on R in a push's dynamic phase; None: noise_scale"
     )
-    num_sigma_points: int = Field(100, ge=10)
+    num_sigma_points: int = Field(100, ge=MIN_SIGMA_POINTS)
     evidence_weights: tuple[float, float, float, float, float] = (1.0, 1.0, 1.0, 1.0, 1.0)
     profile_evidence_weights: dict[str, tuple[float, float, float, float, float]] = Field(
         default_factory=dict, description="per speed profile; absent: evidence_weights"
@@ -280,7 +281,7 @@ def save_checkpoint(model: TrainedModel, path: Path) -> Path:
     payload = {
         "format": CHECKPOINT_FORMAT,
         "format_version": CHECKPOINT_VERSION,
-        "pushtoknow_version": pushtoknow.__version__,
+        "pushtoknow_version": __version__,
         "torch_version": str(torch.__version__),
         "variant": model.variant,
         "models_config": model.models_config.model_dump(mode="json"),
@@ -322,7 +323,7 @@ def load_checkpoint(path: Path) -> TrainedModel:
     if version != CHECKPOINT_VERSION:
         raise CheckpointError(
             f"{path} has checkpoint format version {version}, this pushtoknow "
-            f"{pushtoknow.__version__} reads version {CHECKPOINT_VERSION}; retrain the model "
+            f"{__version__} reads version {CHECKPOINT_VERSION}; retrain the model "
             "or use the pushtoknow version that wrote it "
             f"({payload.get('pushtoknow_version', 'unknown')})"
         )

@@ -21,7 +21,7 @@ class RealReport:
     object: str
     data_dir: str
     model: str
-    forest_data: str
+    forest_data: str | None
     seed: int
     conversion: dict
     pushes: list[dict]
@@ -29,9 +29,9 @@ class RealReport:
     truth_source: dict[str, str]
     friction_reference: dict
     filter: dict
-    forest: dict
+    forest: dict | None
     identify: dict | None
-    prior_mean: dict[str, float]
+    prior_mean: dict[str, float] | None
     errors: dict
     mu_m: dict
     ranges: dict[str, list[float]]
@@ -49,11 +49,14 @@ def table_rows(report: RealReport) -> tuple[list[str], list[list[str]]]:
     n = len(report.filter["per_push"])
     header = ["parameter", "truth", "filter prior"]
     header += [f"filter after push {k + 1}" for k in range(n)]
-    header.append(f"forest ({n} pushes)")
+    forest = report.forest
+    if forest is not None:
+        header.append(f"forest ({n} pushes)")
     ident = report.identify
     if ident is not None:
         header.append(f"identify ({n} pushes)")
-    header.append("prior mean")
+    if report.prior_mean is not None:
+        header.append("prior mean")
     rows = []
     for p in PARAM_NAMES:
         fp = report.filter["prior"][p]
@@ -61,21 +64,25 @@ def table_rows(report: RealReport) -> tuple[list[str], list[list[str]]]:
         row.append(_fmt(fp["mean"], p, fp["std"]))
         for e in report.filter["per_push"]:
             row.append(_fmt(e[p]["mean"], p, e[p]["std"]))
-        f = report.forest["per_push"][-1][p]
-        row.append(_fmt(f["mean"], p, f["std"]))
+        if forest is not None:
+            f = forest["per_push"][-1][p]
+            row.append(_fmt(f["mean"], p, f["std"]))
         if ident is not None:
             i = ident["per_push"][-1][p]
             row.append(_fmt(i["mean"], p, i["std"]))
-        row.append(_fmt(report.prior_mean[p], p))
+        if report.prior_mean is not None:
+            row.append(_fmt(report.prior_mean[p], p))
         rows.append(row)
     mm = report.mu_m
     row = ["μ·m (kg)", _fmt(mm["truth"], "mu_m")]
     row.append(_fmt(mm["filter_prior"]["mean"], "mu_m", mm["filter_prior"]["std"]))
     row += [_fmt(e["mean"], "mu_m", e["std"]) for e in mm["filter"]]
-    row.append(_fmt(mm["forest"][-1], "mu_m"))
+    if forest is not None:
+        row.append(_fmt(mm["forest"][-1], "mu_m"))
     if ident is not None:
         row.append(_fmt(mm["identify"][-1]["mean"], "mu_m", mm["identify"][-1]["std"]))
-    row.append(_fmt(mm["prior_mean"], "mu_m"))
+    if report.prior_mean is not None:
+        row.append(_fmt(mm["prior_mean"], "mu_m"))
     rows.append(row)
     return header, rows
 
@@ -90,9 +97,12 @@ def error_rows(report: RealReport) -> tuple[list[str], list[list[str]]]:
         return [*cells, "—" if prod is None else f"{prod:.3f}"]
 
     n = len(er["filter"])
-    rows = [["prior mean", *fmt(er["prior_mean"], mm["prior_mean"])]]
+    rows = [["prior mean", *fmt(er["prior_mean"], mm["prior_mean"])]] if "prior_mean" in er else []
     rows += [[f"filter, push {k + 1}", *fmt(er["filter"][k], mm["filter"][k])] for k in range(n)]
-    rows += [[f"forest, push {k + 1}", *fmt(er["forest"][k], mm["forest"][k])] for k in range(n)]
+    if "forest" in er:
+        rows += [
+            [f"forest, push {k + 1}", *fmt(er["forest"][k], mm["forest"][k])] for k in range(n)
+        ]
     if "identify" in er:
         rows += [
             [f"identify, push {k + 1}", *fmt(er["identify"][k], mm["identify"][k])]

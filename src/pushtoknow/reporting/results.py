@@ -33,6 +33,16 @@ COLUMNS = [*PARAM_NAMES, "overall"]
 HEADERS = ["m", "μ", "c_x", "c_y", "I_z", "overall"]
 
 
+def shown_path(path: str) -> str:
+    """`path` as a report shows it: relative to the working directory when inside it (a
+    report names no folder of the machine that made it), else its last two parts."""
+    p = Path(path)
+    try:
+        return str(p.resolve().relative_to(Path.cwd().resolve()))
+    except ValueError:
+        return str(Path(*p.parts[-2:]))
+
+
 def _cell(mean: float, std: float | None = None) -> str:
     return f"{mean:.3f}" if std is None else f"{mean:.3f} ± {std:.3f}"
 
@@ -194,7 +204,7 @@ def render_report(results: dict, command: str, appendices: list[str] = ()) -> st
         f"Python {mach['python']}, torch {mach['torch']}. Evaluation seed {cfg['seed']}, "
         f"{cfg['pushes']} pushes per object, {cfg['folds']} folds; training data: "
         f"{results['data']['objects']} objects, {results['data']['pushes']} pushes "
-        f"(`{results['data']['path']}`).",
+        f"(`{shown_path(results['data']['path'])}`).",
         "",
         "Models:",
         "",
@@ -204,7 +214,7 @@ def render_report(results: dict, command: str, appendices: list[str] = ()) -> st
         t = info.get("timings", {}).get("total_s")
         marker = (info.get("sim_config") or {}).get("orientation_marker", False)
         out.append(
-            f"- **{m['name']}** `{m['path']}`: trained with seed {info.get('seed')} on "
+            f"- **{m['name']}** `{shown_path(m['path'])}`: trained with seed {info.get('seed')} on "
             f"{info.get('train_objects')} objects × {info.get('pushes_per_object')} pushes "
             f"(data seed {info.get('data_seed')}, {info.get('objects_from')})"
             + (f", {t / 60:.1f} min" if t else "")

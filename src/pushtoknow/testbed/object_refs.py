@@ -8,6 +8,7 @@ from pathlib import Path
 
 import yaml
 
+from pushtoknow.common.config import read_utf8
 from pushtoknow.common.errors import ObjectSpecError, yaml_error_summary
 from pushtoknow.testbed.objects import ObjectSpec, catalogue_object
 from pushtoknow.testbed.random_shapes import parse_random_ref
@@ -37,7 +38,9 @@ def load_object_spec(source: str | Path) -> ObjectSpec:
             "<file>", s, "no such file (and not of the form catalogue:ID or random:SEED:I)"
         )
     try:
-        data = yaml.safe_load(path.read_text())  # YAML is a superset of JSON
+        data = yaml.safe_load(read_utf8(path))  # YAML is a superset of JSON
     except yaml.YAMLError as e:
         raise ObjectSpecError("<file>", s, yaml_error_summary(e)) from None
+    except ValueError as e:  # not UTF-8 text
+        raise ObjectSpecError("<file>", s, str(e)) from None
     return ObjectSpec.from_dict(data)

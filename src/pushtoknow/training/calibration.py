@@ -33,6 +33,7 @@ import torch
 from pydantic import Field, field_validator, model_validator
 
 from pushtoknow.common.config import Config
+from pushtoknow.common.params import MIN_SIGMA_POINTS
 from pushtoknow.filters.shapes import expect_shape
 from pushtoknow.models.calibration import (
     DIRECTIONS,
@@ -70,7 +71,7 @@ class SequenceCalibrationConfig(Config):
         description="standard errors of the NLL within which a smaller weight ties with the "
         "lowest NLL's and is chosen (0: the lowest NLL's weight)",
     )
-    num_sigma_points: int = Field(32, ge=10)
+    num_sigma_points: int = Field(32, ge=MIN_SIGMA_POINTS)
     init_pose_std: tuple[float, float, float] = (1e-3, 1e-3, 0.01)
     max_weights: dict[str, float] = Field(
         {},

@@ -25,6 +25,7 @@ from pydantic import Field
 
 from pushtoknow.common.angles import wrap_angle
 from pushtoknow.common.config import Config
+from pushtoknow.common.params import MIN_SIGMA_POINTS
 from pushtoknow.filters.base import BeliefFilter
 from pushtoknow.filters.gaussian import safe_cholesky
 from pushtoknow.models.checkpoint import ParamPrior
@@ -36,7 +37,7 @@ class EndToEndConfig(Config):
     steps: int = Field(300, ge=0)
     batch_size: int = Field(16, ge=1)
     window: int = Field(8, ge=1, description="filter steps per truncated window")
-    num_sigma_points: int = Field(32, ge=10)
+    num_sigma_points: int = Field(32, ge=MIN_SIGMA_POINTS)
     lr: float = Field(3e-4, gt=0)
     weight_decay: float = Field(1e-5, ge=0)
     grad_clip: float = Field(1.0, gt=0)
@@ -58,7 +59,7 @@ class EndToEndConfig(Config):
     )
     val_every: int = Field(50, ge=1)
     val_pushes: int = Field(32, ge=1, description="validation pushes (whole, from the prior)")
-    val_num_sigma_points: int = Field(32, ge=10)
+    val_num_sigma_points: int = Field(32, ge=MIN_SIGMA_POINTS)
 
 
 def gaussian_nll(residual: torch.Tensor, cov: torch.Tensor) -> torch.Tensor:

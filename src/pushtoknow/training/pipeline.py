@@ -25,10 +25,12 @@ from pathlib import Path
 import torch
 from pydantic import Field
 
-import pushtoknow
 from pushtoknow.common.config import Config
 from pushtoknow.common.errors import DatasetError
+from pushtoknow.common.params import MIN_SIGMA_POINTS
+from pushtoknow.common.version import __version__
 from pushtoknow.datasets.generate import GENERATION_FILE
+from pushtoknow.datasets.shards import warn_if_incomplete
 from pushtoknow.filters.base import FilterConfig
 from pushtoknow.models.checkpoint import (
     InferenceSettings,
@@ -60,7 +62,7 @@ class CalibrationConfig(Config):
     noise_scales: tuple[float, ...] = (1.0, 4.0, 16.0, 64.0)
     update_every: tuple[int, ...] = (1, 5)
     val_pushes: int = Field(48, ge=1)
-    num_sigma_points: int = Field(32, ge=10)
+    num_sigma_points: int = Field(32, ge=MIN_SIGMA_POINTS)
 
 
 class TrainConfig(Config):
@@ -84,7 +86,7 @@ class TrainConfig(Config):
     end_to_end: EndToEndConfig = EndToEndConfig()
     calibration: CalibrationConfig = CalibrationConfig()
     sequence_calibration: SequenceCalibrationConfig = SequenceCalibrationConfig()
-    inference_sigma_points: int = Field(100, ge=10)
+    inference_sigma_points: int = Field(100, ge=MIN_SIGMA_POINTS)
 
 
 class CsvLog:
@@ -176,6 +178,7 @@ def train_model(
     reused = load_checkpoint(visnet_from).visnet if visnet_from is not None else None
     camera, sim_cfg = dataset_camera(data)
     check_testbed_version(sim_cfg, f"the pushes of dataset {data}")
+    warn_if_incomplete(data, "--data")
     t_start = time.perf_counter()
     pt = load_push_tensors(data, cfg.max_objects)
     objects = len(torch.unique(pt.object_index))
@@ -319,7 +322,7 @@ def train_model(
             "timings": timings,
             "machine": f"{platform.processor() or platform.machine()}, "
             f"{torch.get_num_threads()} threads",
-            "pushtoknow_version": pushtoknow.__version__,
+            "pushtoknow_version": __version__,
         }
     )
     save_checkpoint(model, out)

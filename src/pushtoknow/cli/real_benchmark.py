@@ -1,0 +1,116 @@
+"""`pushtoknow evaluate-real`: the real-data benchmark, every estimator on every object of a
+folder of real pushes (`pushtoknow.evaluation.real_benchmark`, docs/DESIGN.md §11)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import typer
+from rich.markup import escape
+from rich.table import Table
+
+from pushtoknow.cli.options import seed_option
+from pushtoknow.cli.shared import app, console, err_console, fail
+from pushtoknow.common.errors import PushToKnowError
+
+
+def _parse_estimators(text: str) -> tuple[str, ...]:
+    from pushtoknow.common.estimators import ESTIMATOR_NAMES
+
+    names = tuple(e.strip() for e in text.split(",") if e.strip())
+    bad = [e for e in names if e not in ESTIMATOR_NAMES]
+    if not names or bad or len(set(names)) != len(names):
+        raise typer.BadParameter(
+            f"--estimators {text!r}: distinct names among {', '.join(ESTIMATOR_NAMES)}"
+        )
+    return names
+
+
+@app.command("evaluate-real")
+def evaluate_real_command(
+    data_dir: Path = typer.Argument(
+        ...,
+        help="folder of real pushes, searched recursively: MIT Push files, recordings, datasets",
+    ),
+    forest_data: Path | None = typer.Option(
+        None, "--forest-data", help="simulated dataset (`pushtoknow simulate`) to fit the forest on"
+    ),
+    model: str = typer.Option(
+        "pretrained", "--model", help="RUN directory or 'pretrained' (perception, vt-addf)"
+    ),
+    seed: int = seed_option(),
+    estimators: str = typer.Option(
+        "physics,vt-addf", "--estimators", help="comma-separated: physics,vt-addf"
+    ),
+    max_pushes: int | None = typer.Option(
+        None, "--max-pushes", min=1, help="only the first K pushes of each object"
+    ),
+    trees: int = typer.Option(200, "--trees", min=1, help="random-forest trees"),
+    out: Path | None = typer.Option(None, "--out", help="write the report JSON here"),
+    as_json: bool = typer.Option(False, "--json", help="print the report as JSON"),
+):
+    """Run every estimator (physics filter, VT-ADDF, the prior, the forest with --forest-data)
+    on every object in DATA_DIR and compare with its known mass, I_z, CoM and the friction
+    measured on its pure translations; μ per surface across its objects."""
+    from pushtoknow.evaluation.real_benchmark import evaluate_real
+
+    names = _parse_estimators(estimators)
+    if out is not None and out.is_dir():
+        raise typer.BadParameter(f"--out {out}: is a folder, not a file")
+
+    def progress(text: str) -> None:
+        err_console.print(f"[dim]{escape(text)}[/]", highlight=False)
+
+    try:
+        report = evaluate_real(
+            data_dir, forest_data, seed, names, max_pushes, model=model,
+            forest_trees=trees, progress=progress,
+        )  # fmt: skip
+    except PushToKnowError as e:
+        fail(e)
+    data = report.to_json()
+    if out is not None:
+        from pushtoknow.common.files import atomic_write
+
+        try:
+            out.parent.mkdir(parents=True, exist_ok=True)
+            atomic_write(out, json.dumps(data, indent=1))
+        except PushToKnowError as e:  # a full disk
+            fail(e)
+    if as_json:
+        print(json.dumps(data))
+        return
+    _print(report)
+    if out is not None:
+        console.print(f"→ {out}")
+
+
+def _print(report) -> None:
+    header, rows = report.table_rows()
+    t = Table(
+        title=f"{report.data_dir}: {len(report.objects)} objects, seed {report.seed}",
+        title_justify="left",
+    )
+    for i, h in enumerate(header):
+        t.add_column(h, justify="left" if i < 2 else "right", no_wrap=i < 2)
+    for r in rows:
+        t.add_row(*r)
+    console.print(t)
+    header, rows = report.surface_rows()
+    if rows:
+        t = Table(title="μ per surface (one surface, one μ)", title_justify="left")
+        for i, h in enumerate(header):
+            t.add_column(h, justify="left" if i in (0, 1, 4) else "right")
+        for r in rows:
+            t.add_row(*r)
+        console.print(t)
+    lines = ["cells: estimate ± std (|z|); * truth outside the 90% interval"]
+    for key, o in report.objects.items():
+        lines += [f"{key}: skipped {s['file']}: {s['reason']}" for s in o["skipped"]]
+        lines += [f"{key}: {m} not run: {why}" for m, why in o["skipped_methods"].items()]
+    lines += [f"{e['object']}: every push skipped" for e in report.empty_objects]
+    lines += [f"note: {n}" for n in report.notes]
+    for line in lines:
+        console.print(f"[dim]{escape(line)}[/]", soft_wrap=True)
+    console.print(f"[dim]{report.seconds:.0f} s[/]")
