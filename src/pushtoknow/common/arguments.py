@@ -9,7 +9,6 @@ from typing import Any, TypeVar
 import numpy as np
 
 from pushtoknow.common.errors import PushToKnowError
-from pushtoknow.common.params import MIN_SIGMA_POINTS
 
 T = TypeVar("T")
 
@@ -79,17 +78,3 @@ def check_vector(
     if finite and not np.isfinite(a).all():
         raise ArgumentValueError(f"{name}: expected finite numbers, got {a.tolist()}")
     return a
-
-
-def check_sigma_points(value: Any, name: str = "num_sigma_points") -> int | None:
-    """A filter's sigma-point count: None (the model's) or an integer ≥ MIN_SIGMA_POINTS."""
-    if value is None:
-        return None
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
-        raise ArgumentTypeError(f"{name}: expected an integer or None, got {describe(value)}")
-    if value < MIN_SIGMA_POINTS:
-        raise ArgumentValueError(
-            f"{name}: at least {MIN_SIGMA_POINTS} (the filter whitens its state and process-noise "
-            f"draws jointly: C > 8 + 3), got {value}"
-        )
-    return int(value)

@@ -778,6 +778,15 @@ def _longest_repeat(values: np.ndarray) -> tuple[int, int]:
     return best, start
 
 
+def strong_force_along(force: np.ndarray, unit: np.ndarray, among: np.ndarray) -> np.ndarray:
+    """(S,) the force (N, 2) along `unit` (N) on its strong samples among the mask `among`
+    (N,): ‖F‖ ≥ `STRONG_FORCE_SHARE` of their peak. A pushed object's force points along the
+    push: more than `AGAINST_SHARE` of them below 0 is a flipped sign."""
+    mag = np.linalg.norm(force, axis=1)
+    strong = among & (mag >= STRONG_FORCE_SHARE * float(mag[among].max()))
+    return force[strong] @ unit
+
+
 def check_mit_push(push: MitPush, *, contact: bool = True) -> None:
     """Refuse a push no estimator may fit: `DatasetError` naming the file, in one line, for
 
@@ -833,9 +842,7 @@ def check_mit_push(push: MitPush, *, contact: bool = True) -> None:
     d = push.tip_pose[-1] - push.tip_pose[0]
     if float(np.linalg.norm(d)) <= TARE_REST_TOLERANCE:
         return
-    mag = np.linalg.norm(push.force, axis=1)
-    strong = push.contact & (mag >= STRONG_FORCE_SHARE * float(mag[push.contact].max()))
-    along = push.force[strong] @ (d / np.linalg.norm(d))
+    along = strong_force_along(push.force, d / np.linalg.norm(d), push.contact)
     against = int((along < 0).sum())
     if against > AGAINST_SHARE * len(along):
         raise DatasetError(

@@ -32,7 +32,12 @@ import numpy as np
 from pushtoknow.common.errors import DatasetError
 from pushtoknow.common.params import PARAM_NAMES
 from pushtoknow.common.version import __version__
-from pushtoknow.datasets.mit_push import CONTACT_FORCE_THRESHOLD, window_means
+from pushtoknow.datasets.mit_push import (
+    AGAINST_SHARE,
+    CONTACT_FORCE_THRESHOLD,
+    strong_force_along,
+    window_means,
+)
 from pushtoknow.datasets.pad_track import push_from_track
 from pushtoknow.testbed.config import PadConfig, SimConfig
 from pushtoknow.testbed.objects import DEFAULT_HEIGHT, ObjectSpec
@@ -60,8 +65,6 @@ MAX_GAP_STEPS = 5.0  # a step longer than this many median steps is a gap (error
 MAX_POSITION = 10.0  # m: a larger |x| or |y| is taken for millimetres
 MAX_HEIGHT_M = 1.0  # m: a larger height is taken for millimetres
 CENTROID_TOLERANCE = 1e-6  # m: an outline whose centroid is farther from the origin is moved
-AGAINST_SHARE = 0.5  # more strong-force samples than this against the push: sign flipped
-STRONG_FORCE_SHARE = 0.5  # strong-force samples: |F| ≥ this share of the push's peak
 WINDOW_EPSILON = 1e-6  # of a step: a sample stamped t_k belongs to the window ending at t_k
 
 
@@ -417,10 +420,9 @@ def _centred(meta: RecordingMeta, where: Path) -> tuple[RecordingMeta, np.ndarra
 def _check_sign(where: Path, group: str, force: np.ndarray, push: Push) -> None:
     """DatasetError when most strong-force samples push against the push direction."""
     mag = np.linalg.norm(force, axis=1)
-    peak = float(mag.max())
-    if peak < CONTACT_FORCE_THRESHOLD:
+    if float(mag.max()) < CONTACT_FORCE_THRESHOLD:
         return
-    along = force[mag >= max(STRONG_FORCE_SHARE * peak, CONTACT_FORCE_THRESHOLD)] @ push.unit
+    along = strong_force_along(force, push.unit, mag >= CONTACT_FORCE_THRESHOLD)
     against = int((along < 0).sum())
     if against > AGAINST_SHARE * len(along):
         raise DatasetError(

@@ -93,14 +93,12 @@ def infer_object(
         check_callable,
         check_instance,
         check_seed,
-        check_sigma_points,
         check_vector,
     )
 
     check_instance(model, TrainedModel, "model", hint="load one with pushtoknow.load_model()")
     check_instance(executor, PushExecutor, "executor")
     check_instance(config, InferenceConfig, "config", hint="build one: InferenceConfig(**settings)")
-    check_sigma_points(config.num_sigma_points, "config.num_sigma_points")
     check_seed(seed)
     check_vector(initial_pose, 3, "initial_pose")
     check_vector(truth, 5, "truth", finite=False)
