@@ -26,7 +26,9 @@ from pushtoknow.common.estimators import ESTIMATOR_NAMES
 from pushtoknow.common.policies import POLICY_NAMES
 from pushtoknow.common.random import stream_seed
 from pushtoknow.identification.fit import Identification
+from pushtoknow.identification.prior import CATALOGUE_PRIOR, EVERYDAY_PRIOR, PriorRanges
 from pushtoknow.identification.recordings import load_recorded_objects, replay_scene
+from pushtoknow.identification.recursive import PhysicsFilterConfig
 from pushtoknow.identification.replay import ReplayScene
 from pushtoknow.inference.estimator import InferenceConfig, InferenceResult, PushEstimate
 from pushtoknow.inference.physics_filter import PhysicsFilterEstimator
@@ -38,10 +40,13 @@ from pushtoknow.testbed.object_refs import load_object_spec
 from pushtoknow.testbed.objects import ObjectSpec
 
 __all__ = [
+    "CATALOGUE_PRIOR",
     "ESTIMATOR_NAMES",
+    "EVERYDAY_PRIOR",
     "InferenceConfig",
     "InferenceResult",
     "ObjectSpec",
+    "PriorRanges",
     "PushEstimate",
     "TrainedModel",
     "estimate_recording",
@@ -132,13 +137,18 @@ def estimate_recording(
     max_pushes: int | None = None,
     seed: int = 0,
     model: TrainedModel | None = None,
+    prior: PriorRanges | None = None,
 ) -> list[InferenceResult]:
     """Estimate each object in recorded pushes (a dataset or `infer` run directory, a shard
     or a recording file; docs/RECORDING.md), its pushes in their recorded order, each from its
     recorded pose. The physics estimator replays them with the outline stored with them (or,
     where none is stored, the one traced in the first image); the learned one needs images.
-    object_index: only that object; max_pushes: the first K pushes of each."""
+    object_index: only that object; max_pushes: the first K pushes of each; prior: the ranges of
+    m, μ and I_z the physics estimator starts from (None: the object's, `RecordedObject.prior`:
+    everyday objects' for real recordings)."""
     _config(1, estimator, "uniform")
+    if prior is not None and not isinstance(prior, PriorRanges):
+        raise TypeError(f"prior: a PriorRanges, not {type(prior).__name__}")
     seed = _seed(seed)
     model = model or load_model()
     objects = load_recorded_objects(Path(path), images=estimator == "vt-addf")
@@ -153,7 +163,12 @@ def estimate_recording(
         if estimator == "physics":
             scene = replay_scene(obj, "dataset") if obj.shape is not None else None
             est = PhysicsFilterEstimator(
-                model, cfg, stream_seed(seed, "estimator"), obj.sim_config, scene=scene
+                model,
+                cfg,
+                stream_seed(seed, "estimator"),
+                obj.sim_config,
+                PhysicsFilterConfig(prior=prior or obj.prior),
+                scene=scene,
             )
         else:
             est = make_estimator(model, cfg, stream_seed(seed, "estimator"), obj.sim_config)

@@ -41,6 +41,20 @@ def test_identify_prints_estimates_as_json(tmp_path):
     assert lo <= 0.25 <= hi  # μ·m of the tiny object
     assert obj["rollouts"] > 0 and obj["profiles"] == ["constant"]
     assert any("inertia" in d for d in obj["unidentified"])
+    assert obj["prior"]["friction"] == [0.35, 0.7]  # a testbed object: the catalogue's
+
+
+def test_identify_takes_the_prior_ranges_given(tmp_path):
+    ds = write_tiny_dataset(tmp_path / "ds")
+    r = run("identify", "--pushes", str(ds), "--workers", "1", "--json",
+            "--prior-friction", "0.05,1.2", "--prior-mass", "0.1,3")  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    (obj,) = json.loads(r.stdout)["objects"]
+    assert obj["prior"]["friction"] == [0.05, 1.2] and obj["prior"]["mass"] == [0.1, 3.0]
+    _one_line_error(
+        run("identify", "--pushes", str(ds), "--prior-mass", "3,0.1"), "--prior-mass", "3–0.1"
+    )
+    _one_line_error(run("identify", "--pushes", str(ds), "--prior-friction", "x"), "LOW,HIGH")
 
 
 def test_identify_exports_the_identified_object_for_mujoco(tmp_path):

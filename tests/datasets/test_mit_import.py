@@ -151,10 +151,10 @@ def test_sample_counts_and_readers(sample_import):
     assert res == {"files": 3, "pushes": 3, "objects": 1, "shards_written": 1, "shards_skipped": 0}
     info = dataset_info(out)
     expected_steps = sum(len(read_mit_push(p)) for p in sorted(SAMPLE_DIR.glob("*.json")))
-    assert (info["shards"], info["objects"], info["pushes"]) == (1, 1, 3)
-    assert info["steps"] == expected_steps
-    assert info["image_shape"] == [64, 64, 3]
-    assert info["profiles"] == {"constant": 3}
+    assert (info.shards, info.objects, info.pushes) == (1, 1, 3)
+    assert info.steps == expected_steps
+    assert info.image_shape == [64, 64, 3]
+    assert info.profiles == {"constant": 3}
 
     from pushtoknow.datasets.torch_dataset import PushDataset
 
@@ -333,7 +333,7 @@ def test_filters_select_subset(synth_dir, tmp_path):
         assert math.isnan(f["objects/1/pushes/0"].attrs["mit_friction"])
     # No acceleration filter: rect3 at 50 mm/s with a=0 and a=1.
     res = import_mit_dataset(synth_dir, tmp_path / "b", shape="rect3", speed=0.05, progress=False)
-    assert (res["files"], res["objects"], dataset_info(tmp_path / "b")["pushes"]) == (2, 1, 2)
+    assert (res["files"], res["objects"], dataset_info(tmp_path / "b").pushes) == (2, 1, 2)
     # Only a speed filter at 20 mm/s: the .h5 file.
     res = import_mit_dataset(synth_dir, tmp_path / "c", speed=0.02, progress=False)
     assert res["files"] == 1
@@ -407,7 +407,7 @@ def test_resume_skips_finished_shards(synth_dir, tmp_path):
     assert (third["shards_written"], third["shards_skipped"], third["pushes"]) == (1, 1, 1)
     assert shard_path(out, 0).stat().st_mtime_ns == stamps[0]
     assert not list(out.glob("*.part")) and not list(out.glob("*.tmp"))
-    assert dataset_info(out)["pushes"] == 2
+    assert dataset_info(out).pushes == 2
     # Other settings into the same directory: refused.
     with pytest.raises(DatasetError, match="other files or settings"):
         import_mit_dataset(synth_dir, out, **{**kw, "speed": 0.02})

@@ -340,3 +340,18 @@ def test_pushes_of_different_lengths_are_replayed_each_over_its_own(tiny, tmp_pa
     long_track, short_track = tracks_from_records(obj.records, obj.sim_config)
     assert long_track.pad is None
     assert short_track.pad is not None and len(short_track.pad) == len(short_track.pose) == 15
+
+
+def test_pusher_friction_is_read_checked_and_reaches_the_replay_settings(tmp_path):
+    from pushtoknow.identification.prior import EVERYDAY_PRIOR
+    from pushtoknow.identification.recordings import load_recorded_objects
+
+    meta, _ = read_recording(_write_raw(tmp_path / "plain.h5", [_synthetic()]))
+    assert meta.pusher_friction == 0.0  # absent: the testbed's frictionless pad
+    path = _write_raw(tmp_path / "f.h5", [_synthetic()], pusher_friction=0.3)
+    assert read_recording(path)[0].pusher_friction == 0.3
+    (obj,) = load_recorded_objects(path)
+    assert obj.sim_config.pad.friction == 0.3
+    assert obj.prior == EVERYDAY_PRIOR  # a recording is of a real object
+    _check_fails(_write_raw(tmp_path / "bad.h5", [_synthetic()], pusher_friction=-0.1),
+                 "pusher_friction=-0.1")  # fmt: skip

@@ -30,10 +30,14 @@ def dataset(tmp_path_factory):
 
 def test_info_counts(dataset):
     info = dataset_info(dataset)
-    assert info["schema_version"] == 1
-    assert info["objects"] == 3 and info["pushes"] == 6
-    assert info["steps"] == 6 * 21  # 2 s at 10 Hz + the t = 0 sample
-    assert info["shards"] == 2
+    assert info.schema_version == 1
+    assert info.objects == 3 and info.pushes == 6
+    assert info.steps == 6 * 21  # 2 s at 10 Hz + the t = 0 sample
+    assert info.shards == 2
+    assert list(info.to_json()) == [
+        "schema_version", "testbed_version", "path", "shards", "objects", "expected_objects",
+        "complete", "pushes", "steps", "profiles", "image_shape", "bytes",
+    ]  # fmt: skip
 
 
 def test_round_trip_matches_direct_simulation(dataset):
@@ -72,7 +76,7 @@ def test_resume_skips_finished_shards(tmp_path):
     assert res == {"shards_written": 1, "shards_skipped": 1, "objects": 3}
     assert first.stat().st_mtime_ns == mtime
     assert not list(tmp_path.glob("*.tmp"))
-    assert dataset_info(tmp_path)["pushes"] == 6
+    assert dataset_info(tmp_path).pushes == 6
 
 
 def test_resume_with_other_settings_is_refused(tmp_path):
@@ -151,8 +155,9 @@ def test_objects_from_file(tmp_path):
 
 def test_verify_counts_intact_shards(dataset):
     info = dataset_info(dataset, verify=True)
-    assert info["verified_shards"] == info["shards"] == 2
-    assert "verified_shards" not in dataset_info(dataset)
+    assert info.verified_shards == info.shards == 2
+    plain = dataset_info(dataset)
+    assert plain.verified_shards is None and "verified_shards" not in plain.to_json()
 
 
 def _flip_byte_in(path, dataset_name: str) -> None:
@@ -201,7 +206,7 @@ def test_a_refused_resume_writes_no_provenance_record(tmp_path, dataset):
     assert not (copy / "generation.json").exists()
     assert generate_dataset(copy, cfg(), progress=False)["shards_skipped"] == 2
     info = dataset_info(copy, verify=True)
-    assert info["verified_shards"] == 2
+    assert info.verified_shards == 2
 
 
 def test_novel_objects_are_the_evaluations_kind():

@@ -48,13 +48,17 @@ def test_summary_folds_and_release_share():
     folds = [np.array([0, 1, 2]), np.array([3, 4, 5])]
     s = summarise_condition(run, folds)
     per_fold = [nrmse(mean[f, 1], truth[f])["mass"] for f in folds]
-    assert s["nrmse"]["mass"]["mean"] == np.mean(per_fold)
-    assert s["nrmse"]["mass"]["std"] == np.std(per_fold)
-    assert s["nrmse"]["overall"]["all"] == nrmse(mean[:, 1], truth)["overall"]
-    assert s["release_share"] == 0.5
+    assert s.nrmse["mass"]["mean"] == np.mean(per_fold)
+    assert s.nrmse["mass"]["std"] == np.std(per_fold)
+    assert s.nrmse["overall"]["all"] == nrmse(mean[:, 1], truth)["overall"]
+    assert s.release_share == 0.5
     inside = np.abs(truth - mean[:, 1]) <= 1.6448536 * 0.01
-    assert s["coverage90"] == inside.mean()
-    assert s["prior_nrmse"] == nrmse(mean[:, 0], truth)
+    assert s.coverage90 == inside.mean()
+    assert s.prior_nrmse == nrmse(mean[:, 0], truth)
+    assert list(s.to_json()) == [
+        "nrmse", "mu_m", "coverage90", "release_share", "seconds_per_object_median",
+        "prior_nrmse",
+    ]  # fmt: skip
 
 
 def test_ablate_profiles_end_to_end_and_resume(tmp_path, tmp_path_factory):

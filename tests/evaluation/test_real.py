@@ -22,7 +22,7 @@ from pushtoknow.evaluation.real import (
     friction_reference,
     load_real_object,
 )
-from pushtoknow.reporting.real import markdown_table
+from pushtoknow.reporting.real import RealReport, markdown_table
 from pushtoknow.testbed.executor import View
 from pushtoknow.testbed.push import Push
 from pushtoknow.testbed.sim import PushRecord
@@ -65,7 +65,7 @@ def forest_dir(tmp_path_factory) -> Path:
 
 
 @pytest.fixture(scope="module")
-def report(real_dir, run_dir, forest_dir) -> dict:
+def report(real_dir, run_dir, forest_dir) -> RealReport:
     return estimate_real_object(
         real_dir, run_dir, forest_dir, seed=0, forest_trees=TREES, identify=False
     )
@@ -140,8 +140,8 @@ def test_friction_reference_on_the_real_pushes(real_dir, real_dir_rescaled):
     values = []
     for d in (real_dir, real_dir_rescaled):
         real = load_real_object(d)
-        files = [a["mit_file"] for a in real["attrs"]]
-        ref = friction_reference(real["records"], mit_object("rect1").mass)
+        files = [a["mit_file"] for a in real.attrs]
+        ref = friction_reference(real.records, mit_object("rect1").mass)
         pure = [p["pure_translation"] for p in ref["pushes"]]
         assert pure == [f == CENTRE for f in files] and sum(pure) == 1
         assert 0.15 < ref["value"] < 0.35
@@ -223,7 +223,7 @@ def test_filter_runs_the_pushes_in_order_carrying_the_posterior(report, real_dir
     model = load_checkpoint(run_dir)
     est = LearnedFilterEstimator(model, real_inference_config(3), seed=0)
     carried, fresh = [], []
-    for k, rec in enumerate(real["records"]):
+    for k, rec in enumerate(real.records):
         est.update(rec, View.before(rec), rec.pose[0])
         carried.append(est.estimate(k + 1).as_dict())
         alone = LearnedFilterEstimator(model, real_inference_config(1), seed=0)
@@ -301,7 +301,8 @@ def test_wrong_directory_or_object_gives_clear_errors(real_dir, forest_dir, tmp_
         load_real_object(real_dir, "rect2")
     with pytest.raises(DatasetError, match=r"'abs:rect1'.*plywood:rect1"):
         load_real_object(real_dir, "abs:rect1")
-    assert load_real_object(real_dir, "plywood:rect1")["shape"] == "rect1"
+    real = load_real_object(real_dir, "plywood:rect1")
+    assert (real.shape, real.surface, real.name) == ("rect1", "plywood", "plywood:rect1")
     (tmp_path / "empty").mkdir()
     with pytest.raises(DatasetError, match="no shard"):
         estimate_real_object(
@@ -365,31 +366,36 @@ def test_identify_row_replays_the_recorded_clock_and_reports_every_push(
         identify_config=IdentifyConfig(**LIGHT_IDENTIFY),
     )  # fmt: skip
     ident = r.identify
-    assert ident["rate_hz"] == pytest.approx(50.0)
-    assert len(ident["per_push"]) == 3 and len(r.errors["identify"]) == 3
-    assert ident["noise_std"]["estimated_from_misfit"] is True
-    assert ident["noise_std"]["force_N"] > 0.05  # a real misfit, not the 0 N stored
-    for p in ident["per_push"]:
+    assert ident.rate_hz == pytest.approx(50.0)
+    assert len(ident.per_push) == 3 and len(r.errors["identify"]) == 3
+    assert ident.noise_std["estimated_from_misfit"] is True
+    assert ident.noise_std["force_N"] > 0.05  # a real misfit, not the 0 N stored
+    for p in ident.per_push:
         for n in PARAM_NAMES:
             lo, hi = p[n]["interval"]
             assert lo <= p[n]["mean"] <= hi and p[n]["std"] > 0
         assert p["mass"]["mean"] > 0 and p["friction"]["mean"] > 0 and p["inertia"]["mean"] > 0
     # μ·m is what quasi-static pushes reveal: within 40% of the measured reference
     assert r.mu_m["identify"][-1]["mean"] == pytest.approx(r.mu_m["truth"], rel=0.4)
-    assert "probe radius 4.75 mm" in ident["model"]
+    assert "probe radius 4.75 mm" in ident.model
     # three pushes: the leave-one-push-out check ran and its spread joined the intervals
-    assert any("leave-one-push-out" in n for n in ident["notes"])
+    assert any("leave-one-push-out" in n for n in ident.notes)
+    assert r.to_json()["identify"] == ident.to_json()
+    assert tuple(ident.to_json()) == ("per_push", "rate_hz", "noise_std", "model", "notes")
     md = markdown_table(r, "rect1")
     assert "identify (3 pushes)" in md and md.count("| identify, push") == 3
 
 
 def test_identify_refuses_pushes_on_different_clocks(real_dir_rescaled, tmp_path):
+    from dataclasses import replace
+
     from pushtoknow.evaluation.real import identify_real, load_real_object
 
     real = load_real_object(real_dir_rescaled)
-    real["attrs"][1] = {**real["attrs"][1], "mit_time_scale": 2.0}
+    attrs = [*real.attrs]
+    attrs[1] = {**attrs[1], "mit_time_scale": 2.0}
     with pytest.raises(DatasetError, match="different time scales"):
-        identify_real(real_dir_rescaled, real, seed=0)
+        identify_real(real_dir_rescaled, replace(real, attrs=attrs), seed=0)
 
 
 def test_identify_reads_a_rescaled_import_on_its_recorded_clock(real_dir, real_dir_rescaled):

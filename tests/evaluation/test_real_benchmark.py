@@ -238,12 +238,21 @@ def test_a_simulated_dataset_is_an_object_folder(forest_dir, run_dir):
 
 def test_physics_row_on_one_push(mit_dir, run_dir):
     """The physics filter with the known outline and tracked poses, no images (~10 s)."""
-    got = evaluate_real(mit_dir, None, 0, ("physics",), max_pushes=1, model=run_dir).to_json()
+    report = evaluate_real(mit_dir, None, 0, ("physics",), max_pushes=1, model=run_dir)
+    got = report.to_json()
     o = got["objects"]["abs:rect1"]
     assert set(o["methods"]) == {"physics", "prior"} and o["prior_of"] == "physics"
     assert len(o["physics"]["updates"]) == 1
     r = o["mu_m"]["methods"]["physics"]
     assert abs(r["rel_error"]) < 0.3  # the steady force of a pure translation: μ·m·g
+    # a real object starts from everyday objects' prior: μ 0.05–1.2, wide in m
+    assert o["physics"]["prior"]["friction"] == [0.05, 1.2]
+    prior_m = o["methods"]["prior"]["mass"]["interval90"]
+    assert prior_m[1] > 3.0  # the catalogue prior ends at 1.2 kg
+    section = report.results_section("pushtoknow evaluate-real DIR")
+    assert section.startswith("## Real objects (`evaluate-real`)")
+    assert "    pushtoknow evaluate-real DIR" in section and "| abs:rect1 | m (kg) |" in section
+    assert "abs:rect1: physics filter, 1 updates, reduced χ²" in section
 
 
 # ------------------------------------------------------------------------------------------

@@ -102,6 +102,7 @@ def test_evaluate_cli_reduced_config(tmp_path_factory, tmp_path):
     printed = json.loads(result.stdout.strip().splitlines()[-1])
     methods = printed["methods"]
     expected = {"vt-addf:uniform", "vt-addf:active-kl", "prior-mean", "forest", "forest-visnet"}
+    expected.add("physics:uniform")  # the physics estimator on the same pushes
     assert set(methods) == expected
     for name, m in methods.items():
         assert set(m["nrmse"]) == {"mass", "friction", "com_x", "com_y", "inertia", "overall"}
@@ -205,3 +206,158 @@ def test_an_inference_cache_without_intervals_is_recomputed(tmp_path, monkeypatc
     key = suite._cache_key(model, "uniform", ["o"], cfg, ("constant",))
     suite._save_run(cache, key, run(False))  # a run without intervals: None, never guessed
     assert suite._load_run(cache, key).lower is None
+
+
+# --- the physics estimator's rows, the random set and merging (--keep) ---------------------
+
+TINY_EVAL = {
+    "heldout_objects": 1,
+    "novel_objects": 0,
+    "pushes": 1,
+    "policies": ["uniform"],
+    "folds": 2,
+    "workers": 1,
+    "forest_trees": 5,
+    "random_objects": 1,
+}
+
+
+@pytest.fixture(scope="module")
+def physics_eval(tmp_path_factory):
+    """A tiny evaluation with the physics rows and a random set of one object: (results, the
+    model, the out folder)."""
+    from pushtoknow.evaluation.suite import run_evaluation
+
+    data, run = tiny_dataset(tmp_path_factory), tiny_run(tmp_path_factory)
+    out = tmp_path_factory.mktemp("physics-eval")
+    cfg = EvaluationConfig.model_validate(TINY_EVAL)
+    return run_evaluation(data, [run], cfg, out), run, out
+
+
+def test_physics_rows_beside_the_learned_ones(physics_eval):
+    results, _, out = physics_eval
+    assert EvaluationConfig().physics_policies == ("uniform",)
+    assert results["primary"] == "vt-addf:uniform"
+    for set_name in ("heldout", "random"):
+        methods = results["sets"][set_name]["methods"]
+        assert list(methods)[:2] == ["vt-addf:uniform", "physics:uniform"]
+        physics, learned = methods["physics:uniform"], methods["vt-addf:uniform"]
+        assert set(physics) == set(learned)  # the same summary, field for field
+        assert physics["profile_share"] is not None and physics["outside_interval"] == 0
+        assert all(np.isfinite(v) for v in physics["nrmse"].values())
+        assert physics["nrmse"] != learned["nrmse"]  # the physics filter's own estimates
+        # the same pushes: the physics run replayed the learned run's
+        cached = ("vt-addf_uniform", "physics_uniform")
+        runs = {m: np.load(out / "cache" / set_name / f"{m}.npz") for m in cached}
+        np.testing.assert_array_equal(
+            runs["physics_uniform"]["push_actions"], runs["vt-addf_uniform"]["push_actions"]
+        )
+        assert "replayed" in results["sets"][set_name]["notes"]["physics:uniform"]
+
+
+def test_the_cache_key_names_the_estimator(tmp_path):
+    from pushtoknow.evaluation.suite import _cache_key
+
+    (tmp_path / "model.pt").write_bytes(b"weights")
+    args = (tmp_path, "uniform", ["catalogue:1"], EvaluationConfig(), ("constant",))
+    pushes = np.zeros((1, 1, 5))
+    keys = {
+        _cache_key(*args),
+        _cache_key(*args, "physics"),
+        _cache_key(*args, "physics", pushes),
+        _cache_key(*args, "physics", pushes + 1),
+    }
+    assert len(keys) == 4
+    assert _cache_key(*args, "vt-addf") == _cache_key(*args)  # the learned runs' keys as before
+
+
+def test_a_random_set_of_one_object(physics_eval):
+    results, _, _ = physics_eval
+    s = results["sets"]["random"]
+    assert s["objects"] == ["random:9001:0"] and s["folds"] == 1
+    assert set(s["methods"]) == {
+        "vt-addf:uniform", "physics:uniform", "prior-mean", "forest", "forest-visnet"
+    }  # fmt: skip
+    assert all(m["objects"] == 1 for m in s["methods"].values())
+    assert results["config"]["random_objects"] == 1
+    assert results["config"]["random_seed"] == 9001
+
+
+def test_merge_keeps_rows_and_computes_only_missing_ones(physics_eval, tmp_path, monkeypatch):
+    """Rows of the kept results stay as they are (one is altered here, to show it is not
+    recomputed); the missing physics row and the missing random set are computed, the latter
+    without training data: no forest rows, the estimators' prior as prior-mean."""
+    from pushtoknow.common.params import si_moments
+    from pushtoknow.evaluation import suite
+    from pushtoknow.evaluation.metrics import nrmse
+    from pushtoknow.identification.prior import prior_moments
+    from pushtoknow.testbed.object_refs import load_object_spec
+
+    results, run, _ = physics_eval
+    kept = json.loads(json.dumps(results, default=float))
+    full_physics = kept["sets"]["heldout"]["methods"].pop("physics:uniform")
+    del kept["sets"]["random"]
+    kept["sets"]["heldout"]["methods"]["vt-addf:uniform"]["nrmse"]["overall"] = 123.0
+    kept["sets"]["heldout"]["notes"] = {}
+    keep = tmp_path / "kept.json"
+    keep.write_text(json.dumps(kept))
+    calls = []
+    real = suite.evaluate_heldout
+
+    def counting(model, objects, *a, estimator="vt-addf", push_actions=None, **k):
+        calls.append((estimator, tuple(objects), push_actions is not None))
+        return real(model, objects, *a, estimator=estimator, push_actions=push_actions, **k)
+
+    monkeypatch.setattr(suite, "evaluate_heldout", counting)
+    cfg = EvaluationConfig.model_validate(TINY_EVAL)
+    merged = suite.run_evaluation(None, [run], cfg, tmp_path / "out", keep=keep)
+    held, old_held = merged["sets"]["heldout"]["methods"], kept["sets"]["heldout"]["methods"]
+    for name, row in old_held.items():
+        assert held[name] == row, name  # bit-identical
+    assert held["vt-addf:uniform"]["nrmse"]["overall"] == 123.0
+    assert list(held) == ["vt-addf:uniform", "physics:uniform", "prior-mean", "forest",
+                          "forest-visnet"]  # fmt: skip
+    same = {k for k in full_physics if held["physics:uniform"][k] == full_physics[k]}
+    assert set(full_physics) - same <= {"seconds_per_object"}  # the same run, recomputed
+    # heldout: the learned run again (its pushes, its row kept), then the physics run
+    assert calls == [
+        ("vt-addf", ("catalogue:10",), False),
+        ("physics", ("catalogue:10",), True),
+        ("vt-addf", ("random:9001:0",), False),
+        ("physics", ("random:9001:0",), True),
+    ]
+    rnd = merged["sets"]["random"]
+    assert set(rnd["methods"]) == {"vt-addf:uniform", "physics:uniform", "prior-mean"}
+    assert rnd["notes"]["forest"] == rnd["notes"]["forest-visnet"] == suite.NO_DATA
+    assert "prior_moments" in rnd["notes"]["prior-mean"]
+    mean, _ = si_moments(*prior_moments())
+    truth = load_object_spec("random:9001:0").params.as_array()[None]
+    assert rnd["methods"]["prior-mean"]["nrmse_all"] == nrmse(mean[None], truth)
+    assert merged["kept"]["rows"] == {"heldout": list(old_held)}
+    assert merged["data"] == kept["data"] and merged["primary"] == "vt-addf:uniform"
+
+
+def test_merge_refuses_rows_of_another_config(physics_eval, tmp_path):
+    from pushtoknow.cli.main import error_message
+    from pushtoknow.common.errors import ConfigError
+    from pushtoknow.evaluation.suite import run_evaluation
+
+    results, run, _ = physics_eval
+    cfg = EvaluationConfig.model_validate(TINY_EVAL)
+    for key, value in (("pushes", 3), ("policies", ["uniform", "random"]), ("seed", 1)):
+        kept = json.loads(json.dumps(results, default=float))
+        kept["config"][key] = value
+        keep = tmp_path / f"{key}.json"
+        keep.write_text(json.dumps(kept))
+        with pytest.raises(ConfigError) as e:
+            run_evaluation(None, [run], cfg, tmp_path / key, keep=keep)
+        assert f"computed with {key} = " in str(e.value) and "\n" not in str(e.value)
+        assert not (tmp_path / key).exists()  # refused before any work
+    # through the command: one line naming the setting
+    args = ["evaluate", "--models", str(run), "--out", str(tmp_path / "cli"), "--keep", str(keep)]
+    args += ["--config", str(CI_CONFIG)]
+    result = runner.invoke(app, args)
+    assert result.exit_code != 0
+    message = error_message(result.exception)
+    assert message is not None and "\n" not in message
+    assert "its rows were computed with pushes = 1, this run has 2" in message

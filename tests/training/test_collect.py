@@ -54,7 +54,7 @@ def test_collected_shards_read_back(uniform_data, tiny_run_dir, tiny_data):
     out, res = uniform_data
     assert res["shards_written"] == 1 and res["shards_skipped"] == 0
     info = dataset_info(out)
-    assert (info["objects"], info["pushes"]) == (3, 6)
+    assert (info.objects, info.pushes) == (3, 6)
     eps = episodes(out)
     assert [ep.object_index for ep in eps] == [FIRST, FIRST + 1, FIRST + 2]
     assert all(len(ep.records) == 2 for ep in eps)
@@ -146,9 +146,9 @@ def test_combined_dataset_trains(tmp_path, tiny_data, uniform_data):
     union = tmp_path / "union"
     res = combine_datasets([tiny_data, collected], union)
     n_obj = DATA_OBJECTS + 3
-    assert (res["objects"], res["pushes"]) == (n_obj, DATA_OBJECTS * DATA_PUSHES + 6)
+    assert (res.objects, res.pushes) == (n_obj, DATA_OBJECTS * DATA_PUSHES + 6)
     info = dataset_info(union)
-    assert (info["objects"], info["pushes"]) == (res["objects"], res["pushes"])
+    assert (info.objects, info.pushes) == (res.objects, res.pushes)
     assert dataset_policies(union) == {"simulate": DATA_OBJECTS * DATA_PUSHES, "uniform": 6}
     gen = json.loads((union / GENERATION_FILE).read_text())
     assert gen["kind"] == "combined" and len(gen["sources"]) == 2

@@ -87,7 +87,7 @@ def test_ci_ablation_resumes_without_retraining(ablation):
     stamps = [p.stat().st_mtime_ns for p in models]
     cfg = EfficiencyConfig.from_yaml(CI_CONFIG)
     before = json.loads((out / "efficiency.json").read_text())
-    assert run_efficiency(cfg, out, seed=0) == before
+    assert run_efficiency(cfg, out, seed=0).to_json() == before
     assert [p.stat().st_mtime_ns for p in models] == stamps
     timings = json.loads((out / "efficiency-run.json").read_text())["timings_this_call"]
     assert "train_s" not in timings
@@ -121,9 +121,10 @@ def test_summarise_spread_over_seeds():
         for r, s, v in [(0, 0, 2.0), (0, 1, 4.0), (1, 1, 1.0), (1, 0, 3.0)]
     ]  # fmt: skip
     out = summarise(rows, ["random"], [0, 1])
-    first, second = out["random"]
-    assert first["val_nll"] == [2.0, 4.0] and second["val_nll"] == [3.0, 1.0]  # by seed
-    assert first["mean"] == 3.0 and first["std"] == pytest.approx(2**0.5)  # ddof = 1
+    first, second = out.policies["random"]
+    assert first.val_nll == [2.0, 4.0] and second.val_nll == [3.0, 1.0]  # by seed
+    assert first.mean == 3.0 and first.std == pytest.approx(2**0.5)  # ddof = 1
+    assert set(out.to_json()["random"][0]) == ROW_KEYS
     assert figure_series(out)["random"] == [(10.0, 3.0, pytest.approx(2**0.5))] * 1 + [
         (14.0, 2.0, pytest.approx(2**0.5))
     ]

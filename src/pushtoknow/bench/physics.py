@@ -60,7 +60,7 @@ def run_physics_bench(seed: int = 0, quick: bool = False) -> PhysicsReport:
             )
     from pushtoknow.bench.sim import run_sim_bench
 
-    rtf = run_sim_bench(pushes=3 if quick else 6, seed=seed)["realtime_factor"]
+    rtf = run_sim_bench(pushes=3 if quick else 6, seed=seed).realtime_factor
     return PhysicsReport(
         getattr(SimConfig(), "testbed_version", 1),
         machine_description(),

@@ -3,13 +3,41 @@
 from __future__ import annotations
 
 import time
+from dataclasses import asdict, dataclass
 
 import numpy as np
 
 from pushtoknow.bench import machine_description, peak_rss_mb
 
 
-def run_sim_bench(pushes: int = 6, seed: int = 0, object_source: str = "catalogue:100") -> dict:
+@dataclass(frozen=True)
+class SimulatorSpeed:
+    """The result of `run_sim_bench` (`pushtoknow bench sim`): simulated seconds per wall
+    second, from the median push (`realtime_factor`) and from all pushes together
+    (`realtime_factor_mean`); the median wall time of one push (s, observation and push
+    sampling included); the timed pushes (after one warm-up push); the push horizon (s); the
+    camera image [height, width] (px); the tactile rate (Hz); the physics timestep (s); the
+    process's peak resident memory (MB) and the machine."""
+
+    realtime_factor: float
+    realtime_factor_mean: float
+    push_wall_s_median: float
+    pushes: int
+    horizon_s: float
+    image: list[int]
+    tactile_hz: float
+    physics_timestep_s: float
+    peak_rss_mb: float
+    machine: str
+
+    def to_json(self) -> dict:
+        return asdict(self)
+
+
+def run_sim_bench(
+    pushes: int = 6, seed: int = 0, object_source: str = "catalogue:100"
+) -> SimulatorSpeed:
+    """Time `pushes` constant-speed pushes of one object (`object_source`) in one process."""
     from pushtoknow.common.random import stream, stream_seed
     from pushtoknow.geometry.affordances import sample_push_affordances
     from pushtoknow.testbed.config import SimConfig
@@ -37,15 +65,15 @@ def run_sim_bench(pushes: int = 6, seed: int = 0, object_source: str = "catalogu
     ex.close()
     walls = np.array(walls)
     horizon = cfg.push.horizon
-    return {
-        "realtime_factor": float(horizon / np.median(walls)),
-        "realtime_factor_mean": float(horizon * len(walls) / walls.sum()),
-        "push_wall_s_median": float(np.median(walls)),
-        "pushes": pushes,
-        "horizon_s": horizon,
-        "image": [cfg.camera.height, cfg.camera.width],
-        "tactile_hz": cfg.tactile.rate_hz,
-        "physics_timestep_s": cfg.physics.timestep,
-        "peak_rss_mb": peak_rss_mb(),
-        "machine": machine_description(),
-    }
+    return SimulatorSpeed(
+        realtime_factor=float(horizon / np.median(walls)),
+        realtime_factor_mean=float(horizon * len(walls) / walls.sum()),
+        push_wall_s_median=float(np.median(walls)),
+        pushes=pushes,
+        horizon_s=horizon,
+        image=[cfg.camera.height, cfg.camera.width],
+        tactile_hz=cfg.tactile.rate_hz,
+        physics_timestep_s=cfg.physics.timestep,
+        peak_rss_mb=peak_rss_mb(),
+        machine=machine_description(),
+    )

@@ -1,4 +1,5 @@
-"""`pushtoknow` commands: benchmarks (bench sim, physics, filter, active, scaling, estimator)."""
+"""`pushtoknow` commands: benchmarks (bench sim, physics, filter, active, scaling, estimator,
+sysid)."""
 
 from __future__ import annotations
 
@@ -40,7 +41,7 @@ def bench_sim(
     from pushtoknow.bench.sim import run_sim_bench
 
     res = run_sim_bench(pushes=pushes, seed=seed)
-    print_result(res, as_json, "simulator speed")
+    print_result(res.to_json(), as_json, "simulator speed")
 
 
 @bench_app.command("physics")
@@ -250,6 +251,146 @@ def _print_estimator_bench(report) -> None:
             "means_outside_interval": s.means_outside_interval,
             "cpu_count": report.cpu_count,
             "torch_threads": report.torch_threads,
+            "machine": report.machine,
+        },
+        False,
+        "summary: speed",
+    )
+
+
+@bench_app.command("sysid")
+def bench_sysid_cmd(
+    objects: int = typer.Option(
+        4, "--objects", min=1, help="random objects random:SEED:0 … random:SEED:N-1"
+    ),
+    objects_seed: int = typer.Option(
+        2026, "--objects-seed", min=0, help="SEED of the random objects"
+    ),
+    object_refs: list[str] = typer.Option(
+        [],
+        "--object",
+        metavar="REF",
+        help="an object reference (catalogue:ID, random:SEED:I, a file); repeat for more; "
+        "replaces the random objects",
+    ),
+    pushes: int = typer.Option(5, "--pushes", min=1),
+    profiles: str = typer.Option(None, "--profiles", help=PROFILES_HELP),
+    model: str = typer.Option(
+        "pretrained",
+        "--model",
+        help="RUN directory or 'pretrained': its testbed settings, camera and VisNet choose "
+        "the pushes, as bench estimator's",
+    ),
+    max_iterations: int = typer.Option(
+        30, "--max-iterations", min=1, help="sysid's Levenberg-Marquardt iterations per object"
+    ),
+    fd_step: float | None = typer.Option(
+        None,
+        "--fd-step",
+        min=1e-9,
+        help="sysid's finite-difference step, normalised units (default 0.01)",
+    ),
+    threads: int | None = typer.Option(
+        None, "--threads", min=1, help="rollout and torch threads (default: one per core)"
+    ),
+    seed: int = seed_option(),
+    as_json: bool = typer.Option(False, "--json", help="print the report as JSON"),
+    out: Path | None = typer.Option(None, "--out", help="write the report's JSON here"),
+):
+    """mujoco.sysid as a baseline: the pushes bench estimator runs with the physics estimator
+    and the uniform policy, fitted by MuJoCo's own system identification given the true outline
+    (the known-scene case): accuracy, 90% coverage, seconds and rollouts per object."""
+    from pushtoknow.bench.estimator import default_objects
+    from pushtoknow.bench.sysid import bench_sysid
+    from pushtoknow.models.checkpoint import load_checkpoint
+    from pushtoknow.pretrained import resolve_model_path
+
+    if out is not None and out.is_dir():
+        raise typer.BadParameter(f"--out {out}: is a folder, not a file")
+    chosen = parse_profiles(profiles) if profiles is not None else None
+    refs = list(object_refs) or default_objects(objects, objects_seed)
+    try:
+        trained = load_checkpoint(resolve_model_path(model))
+    except (PushToKnowError, OSError) as e:
+        fail(e)
+    n = len(refs)
+
+    def progress(i, row) -> None:
+        err_console.print(
+            f"object {i + 1}/{n} {row.name or row.ref}: fit {row.fit_s:.1f} s, "
+            f"{row.evaluations} evaluations, object {row.object_s:.1f} s",
+            highlight=False,
+        )
+
+    err_console.print(
+        f"bench sysid: {n} objects, {pushes} pushes, seed {seed}, known outline",
+        highlight=False,
+    )
+    try:
+        report = bench_sysid(
+            trained,
+            refs,
+            pushes,
+            chosen or trained.profiles,
+            seed,
+            max_iterations=max_iterations,
+            threads=threads,
+            fd_step=fd_step,
+            on_object=progress,
+        )
+    except PushToKnowError as e:
+        fail(e)
+    if not save_and_print_json(report.to_json(), out, as_json):
+        _print_sysid_bench(report)
+
+
+def _print_sysid_bench(report) -> None:
+    from rich.table import Table
+
+    from pushtoknow.common.params import PARAM_NAMES
+
+    s = report.summary
+    per_object = Table(
+        title=f"mujoco.sysid after {report.pushes} pushes, {report.scene} "
+        "(per parameter: |error| / catalogue range, and the truth's z-score)",
+        title_justify="left",
+    )
+    per_object.add_column("object", no_wrap=True)
+    per_object.add_column("fit s", justify="right")
+    per_object.add_column("evaluations", justify="right")
+    for p in PARAM_NAMES:
+        per_object.add_column(p, justify="right", no_wrap=True)
+    per_object.add_column("μ·m error", justify="right")
+    for r in report.objects:
+        per_object.add_row(
+            r.name or r.ref,
+            f"{r.fit_s:.3g}",
+            str(r.evaluations),
+            *(
+                f"{r.error_norm[p]:.3f} ({r.zscore[p]:+.1f})"
+                if r.interval_bounded[p]
+                else f"{r.error_norm[p]:.3f} (unbounded)"
+                for p in PARAM_NAMES
+            ),
+            f"{100 * r.mu_m_rel_error:+.1f}%",
+        )
+    console.print(per_object)
+    accuracy = Table(title="summary: accuracy", title_justify="left")
+    accuracy.add_column("parameter")
+    accuracy.add_column("mean |err|/range", justify="right")
+    accuracy.add_column("90% coverage", justify="right")
+    for p in PARAM_NAMES:
+        accuracy.add_row(p, f"{s.error_norm_mean[p]:.3f}", f"{s.coverage90[p]:.2f}")
+    accuracy.add_row("overall", f"{s.error_norm_overall:.3f}", "")
+    console.print(accuracy)
+    print_result(
+        {
+            "fit_s_median": s.fit_s_median,
+            "object_s_median": s.object_s_median,
+            "evaluations_median": s.evaluations_median,
+            "mu_m_rel_error_mean_abs": s.mu_m_rel_error_mean_abs,
+            "unbounded_intervals": s.unbounded_intervals,
+            "threads": report.threads,
             "machine": report.machine,
         },
         False,

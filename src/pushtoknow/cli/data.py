@@ -100,15 +100,15 @@ def dataset_info_cmd(
         info = dataset_info(root, verify=verify)
     except PushToKnowError as e:
         fail(e)
-    if (note := incompleteness(info)) is not None:
+    if (note := incompleteness(info.objects, info.expected_objects)) is not None:
         err_console.print(f"[bold yellow]{escape(note)}[/]")
     if as_json:
-        print(json.dumps(info))
+        print(json.dumps(info.to_json()))
         return
     t = Table(title=str(root))
     t.add_column("field")
     t.add_column("value")
-    for k, v in info.items():
+    for k, v in info.to_json().items():
         t.add_row(k, str(v))
     console.print(t)
 

@@ -192,7 +192,12 @@ def ablate_profiles_cmd(
 @app.command("evaluate")
 def evaluate_cmd(
     ctx: typer.Context,
-    data: Path = typer.Option(..., "--data", help="training dataset (forest + prior-mean fit)"),
+    data: Path = typer.Option(
+        None,
+        "--data",
+        help="training dataset (forest + prior-mean fit); without it, sets computed here get no "
+        "forest rows and the estimators' prior as their prior-mean row",
+    ),
     models: list[str] = typer.Option(
         ..., "--models", help="trained runs (RUN dir, model.pt or 'pretrained'); repeat the flag"
     ),
@@ -212,9 +217,28 @@ def evaluate_cmd(
         help="add the 'oracle' row: physics-based identification on the same pushes with the "
         "true footprint and the simulator's own physics, an upper bound (~40 s per object)",
     ),
+    physics_policies: str = typer.Option(
+        None,
+        "--physics-policies",
+        help="comma-separated policies the physics estimator is evaluated under (rows "
+        "physics:POLICY), 'none' for none; default: the config's (uniform)",
+    ),
+    random_objects: int = typer.Option(
+        None, "--random-objects", min=0, help="random-shape set size (default: the config's, 0)"
+    ),
+    random_seed: int = typer.Option(
+        None, "--random-seed", min=0, help="seed of the random shapes (default: 9001)"
+    ),
+    keep: Path = typer.Option(
+        None,
+        "--keep",
+        help="a results.json whose rows are kept, not recomputed: only missing sets and rows "
+        "are computed (its pushes, seed, folds, object counts and policies must be this run's)",
+    ),
 ):
-    """Prior mean, random forest (ground-truth and VisNet poses), each model and push policy on
-    held-out and novel objects: NRMSE (mean ± std over folds), coverage, figures, RESULTS.md."""
+    """Prior mean, random forest (ground-truth and VisNet poses), each model and push policy and
+    the physics estimator on held-out, novel (and random-shape) objects: NRMSE (mean ± std over
+    folds), coverage, figures, RESULTS.md. --keep: add missing rows to an earlier results.json."""
 
     from rich.progress import Progress
 
@@ -224,6 +248,10 @@ def evaluate_cmd(
 
     cfg = EvaluationConfig.from_yaml(config) if config else EvaluationConfig()
     overrides = {"folds": folds, "seed": seed, "workers": workers, "oracle": oracle}
+    overrides |= {"random_objects": random_objects, "random_seed": random_seed}
+    if physics_policies is not None:
+        names = [p.strip() for p in physics_policies.split(",") if p.strip()]
+        overrides["physics_policies"] = () if names == ["none"] else tuple(names)
     cfg = cfg.model_copy(update={k: v for k, v in overrides.items() if v is not None})
     cfg = EvaluationConfig.model_validate(cfg.model_dump())
     refs = [r for m in models for r in m.split(",") if r]
@@ -235,7 +263,15 @@ def evaluate_cmd(
 
         def progress(desc: str, total: int):
             task = bar.add_task(desc, total=total)
-            return lambda: bar.advance(task)
+            if err_console.is_terminal:
+                return lambda: bar.advance(task)
+            done = iter(range(1, total + 1))  # a log (no live bar): one line per object
+
+            def advance():
+                bar.advance(task)
+                err_console.print(f"{desc}: {next(done, total)}/{total} objects")
+
+            return advance
 
         results = run_evaluation(
             data,
@@ -245,6 +281,7 @@ def evaluate_cmd(
             progress=progress,
             echo=lambda m: err_console.print(m),
             runner=runner,
+            keep=keep,
         )
     command = command_line(ctx)
     (out / "RESULTS.md").write_text(render_report(results, command, extra))
@@ -306,18 +343,18 @@ def ablate_efficiency(
 
         markdown.write_text(efficiency_markdown(results, command_line(ctx)) + "\n")
     if as_json:
-        print(json.dumps(results))
+        print(json.dumps(results.to_json()))
         return
     t = Table(title="validation loss vs training pushes (mean ± std over seeds)")
     for c in ("policy", "pushes", "param NLL", "param RMSE (norm.)"):
         t.add_column(c, justify="right")
-    for p, rows in results.items():
-        for r in rows:
+    for p, rounds in results.policies.items():
+        for r in rounds:
             t.add_row(
                 p,
-                str(r["pushes"]),
-                f"{r['mean']:.4g} ± {r['std']:.2g}",
-                f"{r['rmse_mean']:.3f} ± {r['rmse_std']:.3f}",
+                str(r.pushes),
+                f"{r.mean:.4g} ± {r.std:.2g}",
+                f"{r.rmse_mean:.3f} ± {r.rmse_std:.3f}",
             )
     console.print(t)
     console.print(

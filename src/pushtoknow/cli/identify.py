@@ -11,6 +11,8 @@ from rich.table import Table
 from pushtoknow.cli.options import (
     checked_export,
     export_option,
+    prior_option,
+    prior_ranges,
     ray_option,
     seed_option,
 )
@@ -99,6 +101,9 @@ def identify_cmd(
     workers: int = typer.Option(2, "--workers", min=1, help="processes for the rollouts"),
     ray: str = ray_option(),
     config: Path = typer.Option(None, "--config", help="IdentifyConfig YAML"),
+    prior_mass: str | None = prior_option("mass"),
+    prior_friction: str | None = prior_option("friction"),
+    prior_inertia: str | None = prior_option("inertia"),
     as_json: bool = typer.Option(False, "--json", help="print the estimates as JSON"),
     export: tuple[str, Path] | None = export_option(),
 ):
@@ -112,11 +117,13 @@ def identify_cmd(
     from pushtoknow.common.parallel import make_runner
     from pushtoknow.identification.config import IdentifyConfig
     from pushtoknow.identification.fit import identify
+    from pushtoknow.identification.prior import EVERYDAY_PRIOR
     from pushtoknow.identification.recordings import load_recorded_objects, replay_scene
     from pushtoknow.identification.replay import RolloutPool
 
     try:
         target = checked_export(export)
+        prior_ranges(EVERYDAY_PRIOR, prior_mass, prior_friction, prior_inertia)  # checked first
         cfg = IdentifyConfig.from_yaml(config) if config else IdentifyConfig()
         cfg = cfg.model_copy(update={"workers": workers})
         objects = load_recorded_objects(
@@ -139,12 +146,17 @@ def identify_cmd(
             for obj in objects:
                 scene = replay_scene(obj, shape, cfg.stop_at_rest)
                 records = obj.records[:max_pushes] if max_pushes else obj.records
+                default = cfg.prior if "prior" in cfg.model_fields_set else obj.prior
+                prior = prior_ranges(default, prior_mass, prior_friction, prior_inertia)
+                obj_cfg = cfg.model_copy(update={"prior": prior})
                 task = bar.add_task(f"{obj.name}: rollouts", total=None)
-                res = identify(records, scene, cfg, seed, lambda n, t=task: bar.advance(t, n), pool)
+                res = identify(
+                    records, scene, obj_cfg, seed, lambda n, t=task: bar.advance(t, n), pool
+                )
                 bar.update(task, total=res.rollouts, completed=res.rollouts)
-                results.append((obj, res))
+                results.append((obj, res, prior))
         if target is not None:
-            obj, res = results[0]
+            obj, res, _ = results[0]
             written = export_identification(res, scene, obj.name, *target)
     except PushToKnowError as e:
         fail(e)
@@ -160,9 +172,10 @@ def identify_cmd(
                 if obj.truth is None
                 else [float(v) if v == v else None for v in obj.truth],
                 "recording_notes": list(obj.notes),
+                "prior": prior.model_dump(mode="json"),
                 **res.as_dict(),
             }
-            for obj, res in results
+            for obj, res, prior in results
         ],
     }
     if target is not None:
@@ -170,9 +183,10 @@ def identify_cmd(
     if as_json:
         print(json.dumps(payload))
         return
-    for obj, res in results:
+    for obj, res, prior in results:
         for note in obj.notes:
             err_console.print(f"{obj.name}: {note}")
+        err_console.print(f"{obj.name}: prior {prior.label()}")
         console.print(_identification_table(obj.name, res, obj.truth))
         console.print(
             f"not identified (prior width kept): {', '.join(res.unidentified) or 'none'}; "

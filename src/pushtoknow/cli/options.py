@@ -117,3 +117,56 @@ def checked_export(export: tuple[str, Path] | None) -> tuple[str, Path] | None:
     if not Path(path).parent.is_dir():
         raise ExportError("--export", str(path), "its folder does not exist")
     return kind, Path(path)
+
+
+PRIOR_HELP = (
+    "range LOW,HIGH the prior spreads {name} over, uniformly ({unit}; default: the testbed "
+    "catalogue's for simulated pushes, everyday objects' for real ones: {everyday})"
+)
+
+
+def _prior_range(value: str | None) -> tuple[float, float] | None:
+    """`--prior-*`'s LOW,HIGH as two numbers (None if not given)."""
+    if value is None:
+        return None
+    try:
+        lo, hi = (float(v) for v in value.split(","))
+    except ValueError:
+        raise typer.BadParameter(f"{value!r}: give LOW,HIGH, e.g. 0.05,1.2") from None
+    return lo, hi
+
+
+def prior_option(name: str):
+    """A `--prior-mass|friction|inertia LOW,HIGH` option (`identification.prior.PriorRanges`)."""
+    from pushtoknow.identification.prior import EVERYDAY_PRIOR
+
+    unit = {"mass": "kg", "friction": "Coulomb coefficient", "inertia": "kg·m²"}[name]
+    lo, hi = getattr(EVERYDAY_PRIOR, name)
+    return typer.Option(
+        None,
+        f"--prior-{name}",
+        metavar="LOW,HIGH",
+        callback=_prior_range,
+        help=PRIOR_HELP.format(name=name, unit=unit, everyday=f"{lo:g}–{hi:g}"),
+    )
+
+
+def prior_ranges(default, mass=None, friction=None, inertia=None):
+    """`default` (`PriorRanges`) with the ranges the `--prior-*` options gave; raises
+    ConfigError naming the option for an impossible range."""
+    from pydantic import ValidationError
+
+    from pushtoknow.common.errors import ConfigError
+    from pushtoknow.identification.prior import PriorRanges
+
+    given = {"mass": mass, "friction": friction, "inertia": inertia}
+    given = {k: v for k, v in given.items() if v is not None}
+    if not given:
+        return default
+    try:
+        return PriorRanges(**{**default.model_dump(), **given})
+    except ValidationError as e:
+        err = e.errors()[0]
+        raise ConfigError(
+            f"--prior-{err['loc'][0]}", err["msg"].removeprefix("Value error, ")
+        ) from None

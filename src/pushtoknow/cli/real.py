@@ -123,12 +123,12 @@ def _print_report(report, error_rows, model_ref: str) -> None:
         )
     ident = report.identify
     if ident is not None:
-        last = ident["per_push"][-1]
+        last = ident.per_push[-1]
         console.print(
-            f"identify: {ident['model']}; replayed at {ident['rate_hz']:g} Hz; not identified "
+            f"identify: {ident.model}; replayed at {ident.rate_hz:g} Hz; not identified "
             f"(prior width kept): {', '.join(last['unidentified']) or 'none'}"
         )
-        for n in ident["notes"]:
+        for n in ident.notes:
             console.print(f"[dim]identify note:[/] {n}")
     for n in report.notes:
         console.print(f"[dim]note:[/] {n}")

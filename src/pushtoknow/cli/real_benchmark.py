@@ -10,8 +10,8 @@ import typer
 from rich.markup import escape
 from rich.table import Table
 
-from pushtoknow.cli.options import seed_option
-from pushtoknow.cli.shared import app, console, err_console, fail
+from pushtoknow.cli.options import prior_option, prior_ranges, seed_option
+from pushtoknow.cli.shared import app, command_line, console, err_console, fail
 from pushtoknow.common.errors import PushToKnowError
 
 
@@ -29,6 +29,7 @@ def _parse_estimators(text: str) -> tuple[str, ...]:
 
 @app.command("evaluate-real")
 def evaluate_real_command(
+    ctx: typer.Context,
     data_dir: Path = typer.Argument(
         ...,
         help="folder of real pushes, searched recursively: MIT Push files, recordings, datasets",
@@ -48,12 +49,19 @@ def evaluate_real_command(
     ),
     trees: int = typer.Option(200, "--trees", min=1, help="random-forest trees"),
     out: Path | None = typer.Option(None, "--out", help="write the report JSON here"),
+    prior_mass: str | None = prior_option("mass"),
+    prior_friction: str | None = prior_option("friction"),
+    prior_inertia: str | None = prior_option("inertia"),
     as_json: bool = typer.Option(False, "--json", help="print the report as JSON"),
+    markdown: Path | None = typer.Option(
+        None, "--markdown", help="write the report as a RESULTS.md section here"
+    ),
 ):
     """Run every estimator (physics filter, VT-ADDF, the prior, the forest with --forest-data)
     on every object in DATA_DIR and compare with its known mass, I_z, CoM and the friction
     measured on its pure translations; μ per surface across its objects."""
     from pushtoknow.evaluation.real_benchmark import evaluate_real
+    from pushtoknow.identification.prior import EVERYDAY_PRIOR
 
     names = _parse_estimators(estimators)
     if out is not None and out.is_dir():
@@ -63,13 +71,27 @@ def evaluate_real_command(
         err_console.print(f"[dim]{escape(text)}[/]", highlight=False)
 
     try:
+        given = prior_mass or prior_friction or prior_inertia
+        prior = (
+            prior_ranges(EVERYDAY_PRIOR, prior_mass, prior_friction, prior_inertia)
+            if given
+            else None
+        )
         report = evaluate_real(
             data_dir, forest_data, seed, names, max_pushes, model=model,
             forest_trees=trees, progress=progress,
+            prior=prior,
         )  # fmt: skip
     except PushToKnowError as e:
         fail(e)
     data = report.to_json()
+    if markdown is not None:
+        from pushtoknow.common.files import atomic_write
+
+        try:
+            atomic_write(markdown, report.results_section(command_line(ctx)))
+        except PushToKnowError as e:
+            fail(e)
     if out is not None:
         from pushtoknow.common.files import atomic_write
 

@@ -29,6 +29,7 @@ import hashlib
 import json
 import os
 import shutil
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import h5py
@@ -285,11 +286,25 @@ def _link(src: Path, dst: Path) -> str:
     return how
 
 
-def combine_datasets(dirs: list[Path], out: Path) -> dict:
+@dataclass(frozen=True)
+class CombinedDataset:
+    """What `combine_datasets` made: the combined directory (`path`), the shards linked into
+    it, and the objects and pushes they hold (summed over the sources)."""
+
+    path: str
+    shards: int
+    objects: int
+    pushes: int
+
+    def to_json(self) -> dict:
+        return asdict(self)
+
+
+def combine_datasets(dirs: list[Path], out: Path) -> CombinedDataset:
     """One dataset directory `out` holding the shards of every directory in `dirs` (see the
     module docstring); idempotent (re-running with the same sources rewrites the links).
     `out/generation.json` sums the sources' objects and pushes and lists their provenance;
-    `out/combined.json` lists the linked files. Returns a summary."""
+    `out/combined.json` lists the linked files."""
     dirs = [Path(d) for d in dirs]
     out = Path(out)
     if not dirs:
@@ -370,7 +385,7 @@ def combine_datasets(dirs: list[Path], out: Path) -> dict:
         tmp = out / (name + ".tmp")
         tmp.write_text(json.dumps(data, indent=1))
         os.replace(tmp, out / name)
-    return {"path": str(out), "shards": len(plan), "objects": total_objects, "pushes": total_pushes}
+    return CombinedDataset(str(out), len(plan), total_objects, total_pushes)
 
 
 def dataset_policies(root: Path) -> dict[str, int]:

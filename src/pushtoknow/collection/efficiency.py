@@ -53,6 +53,7 @@ import math
 import os
 import time
 from collections.abc import Callable
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
@@ -152,7 +153,63 @@ def _model_done(run: Path) -> bool:
     return (run / "model.pt").exists() and (run / "training.json").exists()
 
 
-def validation_loss(model_dir: Path, val_data: Path, cfg: EfficiencyConfig, seed: int) -> dict:
+@dataclass(frozen=True)
+class ValidationMetrics:
+    """One model's validation metrics (`validation_loss`; the module docstring): mean NLL of
+    the true normalised parameters after one push from the prior (`val_nll`, nats), its median
+    over pushes (`val_nll_median`), the normalised parameter RMSE after the push and before it
+    (`val_rmse`, `val_prior_rmse`; mean over the five), the share of true parameters inside
+    the 90% interval (`val_coverage90`), the validation pushes (`val_pushes`) and the model's
+    inference settings (`inference`, `InferenceSettings` as JSON). `to_json()` is the content
+    of the model's validation.json."""
+
+    val_nll: float
+    val_rmse: float
+    val_nll_median: float
+    val_coverage90: float
+    val_prior_rmse: float
+    val_pushes: int
+    inference: dict
+
+    def to_json(self) -> dict:
+        return asdict(self)
+
+
+@dataclass(frozen=True)
+class EfficiencyRound:
+    """One policy's models after one round (round 0: M0, shared by every policy), over the
+    replicate seeds: the pushes of their training data (`pushes`), the seeds, per seed (in
+    `seeds` order) val_nll, val_rmse and val_nll_median (`ValidationMetrics`), and over the
+    seeds the mean and std of val_nll (`mean`, `std`) and of val_rmse (`rmse_mean`,
+    `rmse_std`); std with ddof = 1, 0 for one seed."""
+
+    round: int
+    pushes: int
+    seeds: list[int]
+    val_nll: list[float]
+    val_rmse: list[float]
+    val_nll_median: list[float]
+    mean: float
+    std: float
+    rmse_mean: float
+    rmse_std: float
+
+
+@dataclass(frozen=True)
+class EfficiencyResults:
+    """The ablation's result (`summarise`, `run_efficiency`): per policy, in the config's
+    order, its `EfficiencyRound`s by round. `to_json()` is efficiency.json ({policy: [round
+    rows]}), what `--json` prints."""
+
+    policies: dict[str, list[EfficiencyRound]]
+
+    def to_json(self) -> dict:
+        return {p: [asdict(r) for r in rounds] for p, rounds in self.policies.items()}
+
+
+def validation_loss(
+    model_dir: Path, val_data: Path, cfg: EfficiencyConfig, seed: int
+) -> ValidationMetrics:
     """The validation metrics of the model in `model_dir` on the dataset `val_data` (see the
     module docstring), cached in `model_dir/validation.json`."""
     from pushtoknow.models.checkpoint import load_checkpoint
@@ -163,7 +220,7 @@ def validation_loss(model_dir: Path, val_data: Path, cfg: EfficiencyConfig, seed
 
     cache = Path(model_dir) / "validation.json"
     if cache.exists():
-        return json.loads(cache.read_text())
+        return ValidationMetrics(**json.loads(cache.read_text()))
     model = load_checkpoint(model_dir)
     pt = load_push_tensors(val_data)
     gen = torch.Generator().manual_seed(seed + 2)
@@ -187,23 +244,23 @@ def validation_loss(model_dir: Path, val_data: Path, cfg: EfficiencyConfig, seed
         seed,
         update_every=model.inference.update_every,
     )
-    out = {
-        "val_nll": res["param_nll"],
-        "val_rmse": res["param_rmse_mean"],
-        "val_nll_median": res["param_nll_median"],
-        "val_coverage90": res["coverage90"],
-        "val_prior_rmse": res["prior_param_rmse_mean"],
-        "val_pushes": len(pt),
-        "inference": model.inference.model_dump(mode="json"),
-    }
-    _write_json(cache, out)
+    out = ValidationMetrics(
+        val_nll=res["param_nll"],
+        val_rmse=res["param_rmse_mean"],
+        val_nll_median=res["param_nll_median"],
+        val_coverage90=res["coverage90"],
+        val_prior_rmse=res["prior_param_rmse_mean"],
+        val_pushes=len(pt),
+        inference=model.inference.model_dump(mode="json"),
+    )
+    _write_json(cache, out.to_json())
     return out
 
 
-def summarise(rows: list[dict], policies, seeds) -> dict:
-    """rows (policy, round, seed, pushes, val_*) → {policy: [per round: per-seed lists, mean,
-    std]} (the `efficiency.json` layout)."""
-    out: dict = {}
+def summarise(rows: list[dict], policies, seeds) -> EfficiencyResults:
+    """rows (policy, round, seed, pushes, val_*) → per policy, per round: the per-seed lists
+    (in `seeds` order), mean and std (`EfficiencyResults`)."""
+    out: dict[str, list[EfficiencyRound]] = {}
     for p in policies:
         mine = [r for r in rows if r["policy"] == p]
         series = []
@@ -214,21 +271,21 @@ def summarise(rows: list[dict], policies, seeds) -> dict:
             nll = [r["val_nll"] for r in at]
             rmse = [r["val_rmse"] for r in at]
             series.append(
-                {
-                    "round": rnd,
-                    "pushes": at[0]["pushes"],
-                    "seeds": [r["seed"] for r in at],
-                    "val_nll": nll,
-                    "val_rmse": rmse,
-                    "val_nll_median": [r["val_nll_median"] for r in at],
-                    "mean": float(np.mean(nll)),
-                    "std": _std(nll),
-                    "rmse_mean": float(np.mean(rmse)),
-                    "rmse_std": _std(rmse),
-                }
+                EfficiencyRound(
+                    round=rnd,
+                    pushes=at[0]["pushes"],
+                    seeds=[r["seed"] for r in at],
+                    val_nll=nll,
+                    val_rmse=rmse,
+                    val_nll_median=[r["val_nll_median"] for r in at],
+                    mean=float(np.mean(nll)),
+                    std=_std(nll),
+                    rmse_mean=float(np.mean(rmse)),
+                    rmse_std=_std(rmse),
+                )
             )
         out[p] = series
-    return out
+    return EfficiencyResults(out)
 
 
 def run_efficiency(
@@ -237,8 +294,8 @@ def run_efficiency(
     seed: int = 0,
     workers: int | None = None,
     log: Callable[[str], None] | None = None,
-) -> dict:
-    """The whole ablation (module docstring); returns the `efficiency.json` content."""
+) -> EfficiencyResults:
+    """The whole ablation (module docstring); returns what efficiency.json holds."""
     threads = torch.get_num_threads()
     if cfg.torch_threads is not None:
         torch.set_num_threads(cfg.torch_threads)
@@ -248,7 +305,7 @@ def run_efficiency(
         torch.set_num_threads(threads)
 
 
-def _run(cfg: EfficiencyConfig, out: Path, seed: int, workers, log) -> dict:
+def _run(cfg: EfficiencyConfig, out: Path, seed: int, workers, log) -> EfficiencyResults:
     from pushtoknow.collection.collect import collect_dataset, combine_datasets
     from pushtoknow.datasets.generate import GenerationConfig, generate_dataset
     from pushtoknow.datasets.shards import dataset_info
@@ -301,7 +358,7 @@ def _run(cfg: EfficiencyConfig, out: Path, seed: int, workers, log) -> dict:
             progress=False,
         )
 
-    def validate(run: Path) -> dict:
+    def validate(run: Path) -> ValidationMetrics:
         return timed("validate_s", validation_loss, run, val_dir, cfg, seed)
 
     shared_visnet = None
@@ -330,7 +387,7 @@ def _run(cfg: EfficiencyConfig, out: Path, seed: int, workers, log) -> dict:
         simulate(initial, cfg.initial, cfg.objects_from, s)
         m0 = base / "m0"
         train(initial, m0, s, shared_visnet)
-        v0 = validate(m0)
+        v0 = validate(m0).to_json()  # rows: for summarise and efficiency.csv
         n0 = cfg.initial.objects * cfg.initial.pushes
         visnet_from = shared_visnet or (m0 if cfg.share_visnet else None)
         for p in cfg.policies:
@@ -361,19 +418,19 @@ def _run(cfg: EfficiencyConfig, out: Path, seed: int, workers, log) -> dict:
                 )
                 parts.append(rdir / "collected")
                 combine_datasets(parts, rdir / "data")
-                n = dataset_info(rdir / "data")["pushes"]
+                n = dataset_info(rdir / "data").pushes
                 run = rdir / "model"
                 train(rdir / "data", run, s, visnet_from)
                 v = validate(run)
                 say(
-                    f"seed {s}, {p}, round {r}: {n} pushes, val NLL {v['val_nll']:.4g}, "
-                    f"RMSE {v['val_rmse']:.4g}"
+                    f"seed {s}, {p}, round {r}: {n} pushes, val NLL {v.val_nll:.4g}, "
+                    f"RMSE {v.val_rmse:.4g}"
                 )
-                rows.append({"policy": p, "round": r, "seed": s, "pushes": n, **v})
-                models.append({"seed": s, "policy": p, "round": r, "run": str(run), **v})
+                rows.append({"policy": p, "round": r, "seed": s, "pushes": n, **v.to_json()})
+                models.append({"seed": s, "policy": p, "round": r, "run": str(run), **v.to_json()})
                 prev = run
     results = summarise(rows, list(cfg.policies), seeds)
-    _write_json(out / RESULTS_FILE, results)
+    _write_json(out / RESULTS_FILE, results.to_json())
     cols = [
         "policy",
         "round",
@@ -405,12 +462,18 @@ def _run(cfg: EfficiencyConfig, out: Path, seed: int, workers, log) -> dict:
     return results
 
 
-def figure_series(results: dict, key: str = "nll") -> dict[str, list[tuple[float, float, float]]]:
+def figure_series(
+    results: EfficiencyResults, key: str = "nll"
+) -> dict[str, list[tuple[float, float, float]]]:
     """{policy: [(pushes, mean, std)]} for `reporting.figures.plot_learning_efficiency`;
-    key "nll" (val_nll) or "rmse" (val_rmse)."""
-    m, s = ("mean", "std") if key == "nll" else ("rmse_mean", "rmse_std")
+    key "nll" (val_nll) or "rmse" (val_rmse); policies with a non-finite mean are left out."""
+
+    def point(r: EfficiencyRound) -> tuple[float, float, float]:
+        m, s = (r.mean, r.std) if key == "nll" else (r.rmse_mean, r.rmse_std)
+        return float(r.pushes), float(m), float(s)
+
     return {
-        p: [(float(r["pushes"]), float(r[m]), float(r[s])) for r in rows]
-        for p, rows in results.items()
-        if all(math.isfinite(r[m]) for r in rows)
+        p: [point(r) for r in rounds]
+        for p, rounds in results.policies.items()
+        if all(math.isfinite(point(r)[1]) for r in rounds)
     }

@@ -9,6 +9,7 @@ previous file as it was and a reader never sees a half-written one. A full disk 
 from __future__ import annotations
 
 import errno
+import fnmatch
 import hashlib
 import os
 from collections.abc import Callable, Mapping
@@ -81,3 +82,19 @@ def file_sha256(path: Path) -> str:
         for block in iter(lambda: f.read(1 << 20), b""):
             h.update(block)
     return h.hexdigest()
+
+
+def find_files(root: Path, pattern: str) -> list[Path]:
+    """Files under `root` whose names match the glob `pattern`, searched recursively through
+    linked folders too (each real folder once), sorted."""
+    found: list[Path] = []
+    seen: set[str] = set()
+    for folder, dirs, names in os.walk(root, followlinks=True):
+        real = os.path.realpath(folder)
+        if real in seen:
+            dirs[:] = []
+            continue
+        seen.add(real)
+        dirs.sort()
+        found.extend(Path(folder) / n for n in names if fnmatch.fnmatch(n, pattern))
+    return sorted(p for p in found if p.is_file())

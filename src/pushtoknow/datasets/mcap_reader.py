@@ -70,6 +70,9 @@ class BagOptions(Config):
     truth: dict[str, float] = Field(default_factory=dict, description="known parameters, SI")
     surface: str = ""
     pusher_radius: float = Field(PadConfig().radius, gt=0, description="m")
+    pusher_friction: float = Field(
+        PadConfig().friction, ge=0, description="Coulomb coefficient, pusher on object"
+    )
     force_noise_std: float | None = Field(None, gt=0, description="N (None: unknown)")
 
     @field_validator("truth")
@@ -89,6 +92,7 @@ class BagOptions(Config):
             truth=np.array([self.truth.get(n, np.nan) for n in PARAM_NAMES], dtype=np.float64),
             surface=self.surface,
             pusher_radius=self.pusher_radius,
+            pusher_friction=self.pusher_friction,
             force_noise_std=self.force_noise_std,
         )
 

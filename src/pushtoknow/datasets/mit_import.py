@@ -77,6 +77,7 @@ from pushtoknow.datasets.lock import dataset_lock
 from pushtoknow.datasets.mit_push import (
     MIT_SHAPES,
     MM_PER_M,
+    PUSHER_FRICTION,
     PUSHER_RADIUS,
     MitPush,
     MitPushMeta,
@@ -167,10 +168,11 @@ def speed_from_mm_per_s(speed_mm_per_s: float) -> float:
 
 
 def mit_sim_config(rate: float = 10.0) -> SimConfig:
-    """Testbed config used to render MIT pushes: default camera, pad radius = the probe's
-    (`PUSHER_RADIUS`, m), tactile rate = `rate` (Hz) and no tactile noise (real forces)."""
+    """Testbed config of MIT pushes: default camera, the probe's radius (`PUSHER_RADIUS`, m) and
+    friction on the objects (`PUSHER_FRICTION`), tactile rate = `rate` (Hz) and no tactile
+    noise (real forces)."""
     return SimConfig(
-        pad=PadConfig(radius=PUSHER_RADIUS),
+        pad=PadConfig(radius=PUSHER_RADIUS, friction=PUSHER_FRICTION),
         tactile=TactileConfig(rate_hz=rate, force_noise_std=0.0),
     )
 

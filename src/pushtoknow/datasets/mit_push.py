@@ -80,6 +80,7 @@ from pathlib import Path
 import numpy as np
 
 from pushtoknow.common.errors import DatasetError, ObjectSpecError
+from pushtoknow.common.files import find_files
 from pushtoknow.common.params import GRAVITY, ObjectParams
 
 __all__ = [
@@ -142,6 +143,11 @@ ACCELERATION_MATCH_TOLERANCE = 1e-9
 
 # --- objects (docs/DESIGN.md §3, §11) ---
 PUSHER_RADIUS = 4.745e-3  # m, point probe
+# Coulomb coefficient of the steel probe on the steel plates: the median ratio of tangential to
+# normal force at the contact over the in-contact samples of rect1, hex and ellip1 (0.14, 0.36,
+# 0.25; the outline's normal at the probe), read off the force directions, not chosen on any
+# estimate's accuracy. A frictionless probe cannot push with those tangential forces.
+PUSHER_FRICTION = 0.25
 ELLIPSE_VERTICES = 64
 # Triangles: the dataset frame sits this far inside both legs from the right-angle corner
 # (MIT's own processing code, pdproc `annotate.py`, and their triangle meshes agree).
@@ -690,8 +696,8 @@ def find_mit_push_files(
     if not root.is_dir():
         raise DatasetError(root, "not a directory")
     chosen: dict[tuple[Path, str], Path] = {}
-    for p in sorted(root.rglob(f"{FILE_PREFIX}*")):
-        if not p.is_file() or p.suffix.lower() not in SUFFIXES:
+    for p in find_files(root, f"{FILE_PREFIX}*"):
+        if p.suffix.lower() not in SUFFIXES:
             continue
         key = (p.parent, p.stem)
         if key not in chosen or p.suffix.lower() == PREFERRED_SUFFIX:

@@ -5,7 +5,7 @@ Format "pushtoknow-recording", version 1, an HDF5 file:
     /            attrs: format, version, object (name), height (m), optional outline (V, 2) m
                         (object frame), truth_mass (kg), truth_friction, truth_com_x (m),
                         truth_com_y (m), truth_inertia (kg·m²), surface, pusher_radius (m),
-                        force_noise_std (N)
+                        pusher_friction (Coulomb coefficient, pusher on object), force_noise_std (N)
     /push-000    time (T,) s · pusher (T, 2) m · object_pose (T, 3) m, m, rad · force (T, 2) N
                  optional: contact (T,) 0..1 · rgb (T, H, W, 3) uint8 · depth (T, H, W) m
                  optional attrs (the commanded push): push_contact (2,) m, push_direction rad,
@@ -40,7 +40,7 @@ from pushtoknow.datasets.mit_push import (
 )
 from pushtoknow.datasets.pad_track import push_from_track
 from pushtoknow.testbed.config import PadConfig, SimConfig
-from pushtoknow.testbed.objects import DEFAULT_HEIGHT, ObjectSpec
+from pushtoknow.testbed.objects import DEFAULT_HEIGHT, FRICTION_LIMIT, ObjectSpec
 from pushtoknow.testbed.push import PROFILES, Push
 from pushtoknow.testbed.sim import PushRecord
 
@@ -74,8 +74,10 @@ class RecordingMeta:
 
     name; height (m); outline (V, 2) m in the object frame or None; truth (5,) SI in
     `PARAM_NAMES` order, NaN where unknown; surface; pusher_radius (m, the pad's);
-    force_noise_std (N, None: unknown, `identify` then takes it from the misfit). The readers
-    add rate (Hz, the pushes' common clock) and notes (what they changed, e.g. a resampling).
+    pusher_friction (the Coulomb coefficient between the pusher and the object; 0: a
+    frictionless pusher, the testbed's pad); force_noise_std (N, None: unknown, `identify` then
+    takes it from the misfit). The readers add rate (Hz, the pushes' common clock) and notes
+    (what they changed, e.g. a resampling).
     """
 
     name: str
@@ -84,6 +86,7 @@ class RecordingMeta:
     truth: np.ndarray = field(default_factory=lambda: np.full(len(PARAM_NAMES), np.nan))
     surface: str = ""
     pusher_radius: float = PadConfig().radius
+    pusher_friction: float = PadConfig().friction
     force_noise_std: float | None = None
     rate: float | None = None
     notes: tuple[str, ...] = ()
@@ -120,6 +123,7 @@ def recording_meta(spec: ObjectSpec, sim_config: SimConfig) -> RecordingMeta:
         outline=np.asarray(spec.footprint.vertices, dtype=np.float64),
         truth=spec.params.as_array(),
         pusher_radius=float(sim_config.pad.radius),
+        pusher_friction=float(sim_config.pad.friction),
         force_noise_std=noise if noise > 0 else None,
     )
 
@@ -144,6 +148,7 @@ def write_recording(path: str | Path, pushes: Sequence[PushRecord], meta: Record
                 height=float(meta.height),
                 surface=meta.surface,
                 pusher_radius=float(meta.pusher_radius),
+                pusher_friction=float(meta.pusher_friction),
                 pushtoknow_version=__version__,
             )
             if meta.force_noise_std is not None:
@@ -216,6 +221,7 @@ def _read_meta(path: Path, attrs) -> RecordingMeta:
         raise DatasetError(path, f"version {shown!r}: this pushtoknow reads version {VERSION}")
     height = _attr_float(path, attrs, "height")
     radius = _attr_float(path, attrs, "pusher_radius")
+    pusher_friction = _attr_float(path, attrs, "pusher_friction")
     outline = None
     if "outline" in attrs:
         outline = np.asarray(attrs["outline"], dtype=np.float64)
@@ -227,6 +233,7 @@ def _read_meta(path: Path, attrs) -> RecordingMeta:
         truth=np.array([np.nan if v is None else v for v in truth], dtype=np.float64),
         surface=_attr_str(attrs, "surface", ""),
         pusher_radius=PadConfig().radius if radius is None else radius,
+        pusher_friction=PadConfig().friction if pusher_friction is None else pusher_friction,
         force_noise_std=_attr_float(path, attrs, "force_noise_std"),
     )
 
@@ -469,6 +476,12 @@ def records_from_pushes(
     if not (math.isfinite(meta.pusher_radius) and 0 < meta.pusher_radius <= MAX_HEIGHT_M):
         raise DatasetError(
             where, f"pusher_radius={meta.pusher_radius!r}: expected metres in (0, 1]"
+        )
+    if not (math.isfinite(meta.pusher_friction) and 0 <= meta.pusher_friction <= FRICTION_LIMIT):
+        raise DatasetError(
+            where,
+            f"pusher_friction={meta.pusher_friction!r}: expected a Coulomb coefficient in "
+            f"[0, {FRICTION_LIMIT:g}]",
         )
     noise = meta.force_noise_std
     if noise is not None and not (math.isfinite(noise) and noise >= 0):

@@ -22,7 +22,7 @@ from __future__ import annotations
 import hashlib
 import json
 import warnings
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from functools import partial
 from pathlib import Path
 
@@ -370,13 +370,42 @@ def _provenance(root: Path) -> dict | None:
     return record
 
 
-def dataset_info(root: Path, verify: bool = False) -> dict:
-    """Summary of a dataset directory: schema_version, testbed_version (the physics the pushes
-    were simulated with, docs/PHYSICS.md), shards, objects, expected_objects and complete (from
-    its GENERATION_FILE; None without one), pushes, steps, bytes; with `verify`, every shard's
-    content is checked (`check_digest`; DatasetError names the first corrupt one), and its
-    fingerprint against the GENERATION_FILE's; verified_shards counts the shards with a matching
-    digest (the others have none)."""
+@dataclass(frozen=True)
+class DatasetInfo:
+    """Summary of a dataset directory (`dataset_info`, `pushtoknow dataset info`):
+    schema_version; testbed_version (the physics the pushes were simulated with,
+    docs/PHYSICS.md; the newest where shards differ); path; shards, objects, pushes and steps
+    (time samples over all pushes) counted in the shards; expected_objects and complete (from
+    its GENERATION_FILE; None without one); pushes per speed profile (`profiles`);
+    image_shape (H, W, 3 of the last push's RGB; None without pushes); bytes (the shards'
+    size on disk); verified_shards (with `verify` only: shards with a matching content digest,
+    the others have none; left out of `to_json()` otherwise)."""
+
+    schema_version: int
+    testbed_version: int
+    path: str
+    shards: int
+    objects: int
+    expected_objects: int | None
+    complete: bool | None
+    pushes: int
+    steps: int
+    profiles: dict[str, int]
+    image_shape: list[int] | None
+    bytes: int
+    verified_shards: int | None = None
+
+    def to_json(self) -> dict:
+        d = asdict(self)
+        if self.verified_shards is None:
+            del d["verified_shards"]
+        return d
+
+
+def dataset_info(root: Path, verify: bool = False) -> DatasetInfo:
+    """Summary of the dataset directory `root` (see `DatasetInfo`); with `verify`, every
+    shard's content is checked (`check_digest`; DatasetError names the first corrupt one), and
+    its fingerprint against the GENERATION_FILE's."""
     shards = list_shards(root)
     if not shards:
         raise DatasetError(root, f"no {SHARD_GLOB} files")
@@ -404,30 +433,31 @@ def dataset_info(root: Path, verify: bool = False) -> dict:
                     prof = str(p.attrs["profile"])
                     profiles[prof] = profiles.get(prof, 0) + 1
                     image_shape = list(p["rgb"].shape[1:])
-    return {
-        "schema_version": SCHEMA_VERSION,
-        "testbed_version": max(testbed_versions),
-        "path": str(root),
-        "shards": len(shards),
-        "objects": objects,
-        "expected_objects": expected,
-        "complete": None if expected is None else objects >= expected,
-        "pushes": pushes,
-        "steps": steps,
-        "profiles": profiles,
-        "image_shape": image_shape,
-        "bytes": int(sum(s.stat().st_size for s in shards)),
-        **({} if verified is None else {"verified_shards": verified}),
-    }
+    return DatasetInfo(
+        schema_version=SCHEMA_VERSION,
+        testbed_version=max(testbed_versions),
+        path=str(root),
+        shards=len(shards),
+        objects=objects,
+        expected_objects=expected,
+        complete=None if expected is None else objects >= expected,
+        pushes=pushes,
+        steps=steps,
+        profiles=profiles,
+        image_shape=image_shape,
+        bytes=int(sum(s.stat().st_size for s in shards)),
+        verified_shards=verified,
+    )
 
 
-def incompleteness(info: dict) -> str | None:
-    """'incomplete: N of M objects written (…)' when `dataset_info`'s `info` says its
-    provenance record plans more objects than its shards hold, else None."""
-    if info["complete"] is not False:
+def incompleteness(objects: int, expected_objects: int | None) -> str | None:
+    """'incomplete: N of M objects written (…)' when a dataset's provenance record plans more
+    objects (`expected_objects`; None without a record) than its shards hold (`objects`), else
+    None."""
+    if expected_objects is None or objects >= expected_objects:
         return None
     return (
-        f"incomplete: {info['objects']} of {info['expected_objects']} objects written (an "
+        f"incomplete: {objects} of {expected_objects} objects written (an "
         "interrupted run: the same command resumes it)"
     )
 
@@ -447,9 +477,7 @@ def warn_if_incomplete(root: Path, use: str) -> str | None:
                 objects += len(f["objects"])
     except DatasetError:
         return None
-    expected = int(record["config"]["objects"])
-    info = {"objects": objects, "expected_objects": expected, "complete": objects >= expected}
-    note = incompleteness(info)
+    note = incompleteness(objects, int(record["config"]["objects"]))
     if note is None:
         return None
     text = f"{use} {root} is {note}"

@@ -15,6 +15,10 @@ from pushtoknow.baselines.random_forest import features_from_records
 from pushtoknow.common.parallel import Workers, runner_for
 from pushtoknow.common.params import product_moments
 from pushtoknow.evaluation.metrics import coverage, nrmse, product_nrmse
+from pushtoknow.inference.policies import PushDecision, PushPolicy
+from pushtoknow.testbed.push import Push
+
+LEARNED_ESTIMATOR = "vt-addf"  # the estimator these runs use unless told (the paper's filter)
 
 
 @dataclass
@@ -41,6 +45,19 @@ class HeldoutRun:
     upper: np.ndarray | None = None
 
 
+class ReplayPolicy(PushPolicy):
+    """Executes the given pushes (K, 5) (`Push.as_array` rows) in order, whatever the candidates
+    and the estimate: another run's pushes on the same object."""
+
+    name = "replay"
+
+    def __init__(self, actions: np.ndarray):
+        self.pushes = [Push.from_array(a) for a in np.asarray(actions, dtype=np.float64)]
+
+    def choose(self, decision: PushDecision) -> Push:
+        return self.pushes[decision.k]
+
+
 def _run_one(args) -> dict:
     import time
 
@@ -48,7 +65,9 @@ def _run_one(args) -> dict:
     from pushtoknow.models.checkpoint import load_checkpoint
     from pushtoknow.testbed.object_refs import load_object_spec
 
-    model_path, object_ref, pushes, policy, seed, sigma_points, profiles = args
+    model_path, object_ref, pushes, policy, seed, sigma_points, profiles, *rest = args
+    estimator = rest[0] if rest else LEARNED_ESTIMATOR
+    given = rest[1] if len(rest) > 1 else None  # (K, 5) pushes to replay, or None
     t0 = time.perf_counter()
     import torch
 
@@ -56,13 +75,30 @@ def _run_one(args) -> dict:
     model = load_checkpoint(model_path)
     spec = load_object_spec(object_ref)
     cfg = InferenceConfig(
-        estimator="vt-addf",
+        estimator=estimator,
         pushes=pushes,
         policy=policy,
         num_sigma_points=sigma_points,
         profiles=profiles,
     )
-    res = infer_simulated(model, spec, cfg, seed, with_truth=False)
+    est = None
+    if estimator == "physics":
+        # objects are the parallel unit here: each physics filter replays in its own process
+        from pushtoknow.common.random import stream_seed
+        from pushtoknow.identification.recursive import PhysicsFilterConfig
+        from pushtoknow.inference.physics_filter import PhysicsFilterEstimator
+
+        est = PhysicsFilterEstimator(
+            model, cfg, stream_seed(seed, "estimator"), filter_config=PhysicsFilterConfig(workers=1)
+        )
+    try:
+        replay = None if given is None else ReplayPolicy(given)
+        res = infer_simulated(
+            model, spec, cfg, seed, with_truth=False, policy=replay, estimator=est
+        )
+    finally:
+        if est is not None:
+            est.close()
     rows = [res.prior, *res.estimates]
     camera = model.camera
     poses = iter(res.poses)
@@ -135,12 +171,30 @@ def evaluate_heldout(
     sigma_points: int | None = None,
     progress=None,
     profiles: tuple[str, ...] = ("constant",),
+    estimator: str = LEARNED_ESTIMATOR,
+    push_actions: np.ndarray | None = None,
 ) -> HeldoutRun:
     """Run inference on each object (`catalogue:ID` or spec strings) on `workers` (local
     processes or a `TaskRunner`); `profiles`: the speed profiles the policy may use
-    (`InferenceConfig.profiles`)."""
+    (`InferenceConfig.profiles`); `estimator`: `InferenceConfig.estimator` (default: the
+    learned filter, whatever `InferenceConfig`'s default). The run's seed depends on neither
+    the estimator nor `workers`: the uniform and random policies make the same pushes for
+    every estimator (their own random stream, `common.random`), but the uniform policy's choice
+    depends on the estimator's orientation estimate (bearings in the object frame), so
+    `push_actions` (N, K, 5), another run's pushes, makes the run execute exactly those pushes
+    instead of the policy's (the policy's name is then a label)."""
     jobs = [
-        (str(model_path), o, pushes, policy, seed * 100_003 + i, sigma_points, tuple(profiles))
+        (
+            str(model_path),
+            o,
+            pushes,
+            policy,
+            seed * 100_003 + i,
+            sigma_points,
+            tuple(profiles),
+            estimator,
+            None if push_actions is None else np.asarray(push_actions[i], dtype=np.float64),
+        )
         for i, o in enumerate(objects)
     ]
     with runner_for(workers) as runner:

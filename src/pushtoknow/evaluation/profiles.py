@@ -16,6 +16,7 @@ from __future__ import annotations
 import json
 import os
 from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
@@ -48,16 +49,37 @@ def parse_condition(text: str) -> Condition:
     return policy.strip(), names
 
 
-def summarise_condition(run: HeldoutRun, folds: Sequence[np.ndarray]) -> dict:
-    """NRMSE after the last push (mean ± std over `folds` of the objects, and over all),
-    μ·m NRMSE, 90% coverage and the share of release pushes."""
+@dataclass(frozen=True)
+class ConditionSummary:
+    """One condition's result (`summarise_condition`), after the last push: NRMSE per
+    parameter and "overall" (the mean of the five) as {"mean", "std"} over the folds of the
+    objects and "all" (over every object) (`nrmse`); the NRMSE of μ·m (`mu_m`); the 90%
+    coverage over all parameters (`coverage90`); the share of executed pushes that were
+    release pushes (`release_share`); the median wall time per object (s); the prior mean's
+    NRMSE per parameter and "overall" (`prior_nrmse`). `to_json()` is what OUT/<condition>.json
+    and profiles.json hold."""
+
+    nrmse: dict[str, dict[str, float]]
+    mu_m: float
+    coverage90: float
+    release_share: float
+    seconds_per_object_median: float
+    prior_nrmse: dict[str, float]
+
+    def to_json(self) -> dict:
+        return asdict(self)
+
+
+def summarise_condition(run: HeldoutRun, folds: Sequence[np.ndarray]) -> ConditionSummary:
+    """The `ConditionSummary` of `run`, with NRMSE mean ± std over `folds` (index arrays into
+    the run's objects)."""
     k = run.mean.shape[1] - 1
     mean, truth = run.mean[:, k], run.truth
     per_fold = [nrmse(mean[f], truth[f]) for f in folds]
     keys = [*PARAM_NAMES, "overall"]
     profiles = [p for obj in (run.profiles or []) for p in obj]
-    return {
-        "nrmse": {
+    return ConditionSummary(
+        nrmse={
             key: {
                 "mean": float(np.mean([r[key] for r in per_fold])),
                 "std": float(np.std([r[key] for r in per_fold])),
@@ -65,12 +87,12 @@ def summarise_condition(run: HeldoutRun, folds: Sequence[np.ndarray]) -> dict:
             }
             for key in keys
         },
-        "mu_m": product_nrmse(mean, truth, run.product[:, k]),
-        "coverage90": coverage(run.zscore[:, k], 0.9)["overall"],
-        "release_share": float(np.mean([p == "release" for p in profiles])) if profiles else 0.0,
-        "seconds_per_object_median": float(np.median(run.seconds)),
-        "prior_nrmse": nrmse(run.mean[:, 0], truth),
-    }
+        mu_m=product_nrmse(mean, truth, run.product[:, k]),
+        coverage90=coverage(run.zscore[:, k], 0.9)["overall"],
+        release_share=float(np.mean([p == "release" for p in profiles])) if profiles else 0.0,
+        seconds_per_object_median=float(np.median(run.seconds)),
+        prior_nrmse=nrmse(run.mean[:, 0], truth),
+    )
 
 
 def run_profile_ablation(
@@ -116,7 +138,7 @@ def run_profile_ablation(
             progress=progress(name, len(objects)) if progress else None,
             profiles=profiles,
         )
-        summary = summarise_condition(run, fold_groups)
+        summary = summarise_condition(run, fold_groups).to_json()
         tmp = path.with_suffix(".json.tmp")
         tmp.write_text(json.dumps({"settings": run_settings, "summary": summary}, indent=1))
         os.replace(tmp, path)

@@ -62,8 +62,9 @@ import math
 import tempfile
 import time
 import warnings
-from dataclasses import fields
+from dataclasses import dataclass, fields
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -83,14 +84,24 @@ from pushtoknow.datasets.shards import (
     warn_if_incomplete,
 )
 from pushtoknow.evaluation.metrics import param_ranges
-from pushtoknow.reporting.real import RealReport
+from pushtoknow.reporting.real import RealIdentification, RealReport
+
+if TYPE_CHECKING:
+    from pushtoknow.common.camera import CameraModel
+    from pushtoknow.models.checkpoint import TrainedModel
+    from pushtoknow.testbed.config import SimConfig
+    from pushtoknow.testbed.objects import ObjectSpec
+    from pushtoknow.testbed.sim import PushRecord
 
 __all__ = [
     "PURE_TRANSLATION_DEG",
     "REPORT_KEYS",
+    "RealIdentification",
+    "RealPushes",
     "RealReport",
     "estimate_real_object",
     "friction_reference",
+    "identify_real",
     "load_real_object",
     "prepare_real_data",
     "real_inference_config",
@@ -106,14 +117,35 @@ REPORT_KEYS = tuple(f.name for f in fields(RealReport))  # the keys of its JSON
 # ============================================================================================
 # Loading
 # ============================================================================================
-def load_real_object(data_dir: Path, obj: str | None = None) -> dict:
+@dataclass(frozen=True)
+class RealPushes:
+    """One object of an ``import-mit`` dataset (`load_real_object`), SI."""
+
+    spec: ObjectSpec  # the object as imported (MIT footprint and mass)
+    # its pushes in file order: pose (T, 3) x, y (m), θ (rad) by motion capture, tactile
+    # (T, 3) F_x, F_y (N) and contact, pusher (T, 2) (m), time (T,) (s)
+    records: list[PushRecord]
+    # per push, the MIT attributes of its HDF5 group ("mit_file", "mit_meta" JSON,
+    # "mit_time_scale", …)
+    attrs: list[dict]
+    surface: str  # MIT names: "plywood", "rect1"
+    shape: str
+    camera: CameraModel  # the import's
+    sim_config: SimConfig  # the import's: rate, pad, table
+    import_info: dict  # the import's import.json
+
+    @property
+    def name(self) -> str:
+        """``SURFACE:SHAPE``."""
+        return f"{self.surface}:{self.shape}"
+
+
+def load_real_object(data_dir: Path, obj: str | None = None) -> RealPushes:
     """One object of an ``import-mit`` dataset directory.
 
     obj: None (the directory must hold exactly one object), ``SHAPE`` or ``SURFACE:SHAPE``
-    (e.g. ``rect1``, ``plywood:rect1``). Returns {"spec", "records" (PushRecord list, file
-    order), "attrs" (per-push MIT attributes), "surface", "shape", "camera", "import"}.
-    Raises `DatasetError` when the directory is not an import-mit dataset or the object is
-    absent or ambiguous (naming the objects it holds).
+    (e.g. ``rect1``, ``plywood:rect1``). Raises `DatasetError` when the directory is not an
+    import-mit dataset or the object is absent or ambiguous (naming the objects it holds).
     """
     data_dir = Path(data_dir)
     if not data_dir.is_dir():
@@ -158,16 +190,16 @@ def load_real_object(data_dir: Path, obj: str | None = None) -> dict:
         attrs = [dict(pushes[k].attrs) for k in sorted(pushes, key=int)]
     if not ep.records:
         raise DatasetError(data_dir, f"object {surface}:{shape} has no pushes")
-    return {
-        "spec": ep.spec,
-        "records": ep.records,
-        "attrs": attrs,
-        "surface": surface,
-        "shape": shape,
-        "camera": camera,
-        "sim_config": sim_config,
-        "import": info,
-    }
+    return RealPushes(
+        spec=ep.spec,
+        records=ep.records,
+        attrs=attrs,
+        surface=surface,
+        shape=shape,
+        camera=camera,
+        sim_config=sim_config,
+        import_info=info,
+    )
 
 
 def _split_object(obj: str | None) -> tuple[str | None, str | None]:
@@ -326,13 +358,13 @@ def _push_digest(pose, tactile) -> str:
     return h.hexdigest()
 
 
-def forest_overlap(forest_data: Path, real: dict) -> str | None:
+def forest_overlap(forest_data: Path, real: RealPushes) -> str | None:
     """A warning when the forest's dataset holds the object under test (`real`, from
     `load_real_object`): an object of the same name, pushes imported from the same MIT files
     (same file names) or with the same recorded pose and force; None when it holds none."""
-    name = real["spec"].name
-    files = {Path(str(a["mit_file"])).name for a in real["attrs"] if "mit_file" in a}
-    digests = {_push_digest(r.pose, r.tactile) for r in real["records"]}
+    name = real.spec.name
+    files = {Path(str(a["mit_file"])).name for a in real.attrs if "mit_file" in a}
+    digests = {_push_digest(r.pose, r.tactile) for r in real.records}
     found = []  # (shard, object name, pushes in common)
     for s in list_shards(forest_data):
         with open_shard(s) as f:
@@ -357,9 +389,9 @@ def forest_overlap(forest_data: Path, real: dict) -> str | None:
     )
 
 
-def rate_note(real: dict, model) -> str | None:
+def rate_note(real: RealPushes, model) -> str | None:
     """A note when the real pushes' clock (the import's rate) is not the model's."""
-    rate, model_rate = real["sim_config"].tactile.rate_hz, model.sim_config.tactile.rate_hz
+    rate, model_rate = real.sim_config.tactile.rate_hz, model.sim_config.tactile.rate_hz
     if math.isclose(rate, model_rate, rel_tol=1e-9):
         return None
     return (
@@ -419,136 +451,202 @@ def estimate_real_object(
     identify_config=None,
 ) -> RealReport:
     """Filter, forest, physics-based identification and prior-mean estimates on the real pushes
-    of one object (module doc).
+    of one object against its reference truth (module doc), as a `RealReport`.
 
     data_dir: an ``import-mit`` output or a folder of raw MIT Push files (imported into
     `import_dir`, default a temporary directory, time-rescaled to the model's training speed
     unless `rescale` is False; see `prepare_real_data`); model_path: a checkpoint or run
     directory (see `pushtoknow.pretrained.resolve_model_path`); forest_data: a simulated
-    dataset directory to fit the forest and the prior mean on (None: neither row, their
-    entries None and absent from `errors` and `mu_m`); obj: see `load_real_object`;
-    num_sigma_points: None = the model's; identify: also fit φ by replaying the pushes in MuJoCo
-    (`identify_real`), with `identify_config` (an `IdentifyConfig`, None: the defaults).
-
-    Returns a `RealReport` (its `to_json()` has the keys `REPORT_KEYS`), all SI:
-    object ("surface:shape"), data_dir, model, forest_data, seed;
-    conversion: {"imported_here", "dir", "as_speed_m_per_s" (None: not rescaled), and when
-    imported here "source", "files"};
-    pushes: per push {file, speed_m_per_s (as labelled), file_speed_m_per_s, time_scale,
-    samples, displacement_m, rotation_deg, pure_translation, filter_pose_error_end};
-    truth: {param: value, friction None if no push qualifies}; truth_source: {param: text};
-    friction_reference: `friction_reference`'s dict;
-    filter: {"prior": {param: {mean, std}}, "per_push": [{param: {mean, std}}, ...],
-    "sigma_points", "variant"}; forest: {"per_push": [...], "training_pushes", "trees"};
-    identify: None, or `identify_real`'s dict;
-    prior_mean: {param: value}; errors: {"filter": [per push {param: e, "overall"}],
-    "forest": [...], "prior_mean": {...}, "filter_prior": {...}} (e = |est − truth| / range);
-    mu_m: {"truth", "filter" [{mean, std} per push], "forest" [per push], "prior_mean",
-    "errors": {"filter", "forest", "prior_mean"} (normalised by the μ·m catalogue range)}, and
-    "identify" entries (errors, μ·m per push count) when identify ran;
-    ranges: {param: [lo, hi]} of the catalogue; notes: list of caveats; seconds: wall time.
+    dataset directory to fit the forest and the prior mean on (None: neither row); obj: see
+    `load_real_object`; num_sigma_points: None = the model's; identify: also fit φ by
+    replaying the pushes in MuJoCo (`identify_real`), with `identify_config` (an
+    `IdentifyConfig`, None: the defaults).
     Raises `DatasetError` (bad data_dir, object or forest_data) or `CheckpointError`.
     """
+    t0 = time.perf_counter()
+    inputs = _load_inputs(data_dir, model_path, forest_data, obj, rescale, import_dir)
+    model, real = inputs.model, inputs.real
+    truth, truth_source, fric = _reference_truth(real)
+    filter_row, beliefs, pose_err = _filter_rows(model, real, seed, num_sigma_points)
+    forest_row = forest_means = prior_mean = None
+    if inputs.training is not None:
+        forest_row, forest_means, prior_mean = _forest_rows(
+            inputs.training, real, forest_trees, seed
+        )
+    ident = identify_real(data_dir, real, seed, identify_config) if identify else None
+    pushes = _push_rows(real, fric, pose_err)
+    return RealReport(
+        object=real.name,
+        data_dir=str(data_dir),
+        model=str(model_path),
+        forest_data=None if forest_data is None else str(forest_data),
+        seed=seed,
+        conversion=inputs.conversion,
+        pushes=pushes,
+        truth={n: (None if np.isnan(v) else float(v)) for n, v in zip(PARAM_NAMES, truth)},
+        truth_source=truth_source,
+        friction_reference=fric,
+        filter=filter_row,
+        forest=forest_row,
+        identify=ident,
+        prior_mean=None if prior_mean is None else _params_dict(prior_mean),
+        errors=_error_rows(truth, beliefs, forest_means, prior_mean, ident),
+        mu_m=_mu_m_rows(truth, beliefs, forest_means, prior_mean, ident),
+        ranges={n: list(PARAM_RANGES[n]) for n in PARAM_NAMES},
+        notes=_notes(truth, pushes, model, real, inputs.cautions),
+        seconds=time.perf_counter() - t0,
+    )
+
+
+@dataclass(frozen=True)
+class _Inputs:
+    """What `estimate_real_object` works on (`_load_inputs`)."""
+
+    model: TrainedModel
+    real: RealPushes
+    conversion: dict  # `prepare_real_data`'s, "dir" None for a temporary import
+    training: tuple[np.ndarray, np.ndarray, np.ndarray] | None  # `_training_features`
+    cautions: list[str]  # warnings given, for the notes
+
+
+def _load_inputs(data_dir, model_path, forest_data, obj, rescale, import_dir) -> _Inputs:
+    """The model, the forest's training set and the real pushes (imported first when raw),
+    checked before any work: a bad `forest_data` fails first, and the pushes must be rendered
+    with the model's camera. Warns when `forest_data` is incomplete or holds the object under
+    test."""
+    from pushtoknow.models.checkpoint import load_checkpoint
+
+    model = load_checkpoint(Path(model_path))
+    training, cautions = None, []
+    if forest_data is not None:  # first: a bad one fails before any work
+        training = _training_features(Path(forest_data))
+        cautions.append(warn_if_incomplete(Path(forest_data), "--forest-data"))
+    as_speed = model.sim_config.push.speed if rescale else None  # its training pushes' speed
+    with tempfile.TemporaryDirectory(prefix="pushtoknow-mit-") as tmp:
+        target = Path(import_dir) if import_dir is not None else Path(tmp) / "import"
+        ds_dir, conversion = prepare_real_data(data_dir, obj, as_speed, target)
+        real = load_real_object(ds_dir, obj)
+    if import_dir is None and conversion["imported_here"]:
+        conversion["dir"] = None  # a temporary directory, gone
+    if model.camera != real.camera:
+        raise DatasetError(
+            data_dir,
+            f"rendered with camera {real.camera}, the model was trained with {model.camera}",
+        )
+    if forest_data is not None and (overlap := forest_overlap(Path(forest_data), real)):
+        warnings.warn(overlap, PushToKnowWarning, stacklevel=3)
+        cautions.append(overlap)
+    return _Inputs(model, real, conversion, training, [c for c in cautions if c is not None])
+
+
+def _reference_truth(real: RealPushes) -> tuple[np.ndarray, dict[str, str], dict]:
+    """(truth (5,) in `PARAM_NAMES` order, friction NaN when no push qualifies; its source per
+    parameter, in words; `friction_reference`'s dict) of the real object (module doc)."""
+    ref = mit_object(real.shape)
+    fric = friction_reference(real.records, ref.mass)
+    mu = fric["value"]
+    truth = np.array([ref.mass, np.nan if mu is None else mu, 0.0, 0.0, ref.inertia], dtype=float)
+    centroid = "footprint centroid (MIT Push objects are uniform)"
+    source = {
+        "mass": f"MIT Push catalogue ({real.shape}, stainless steel)",
+        "friction": "measured from the pushes: " + fric["rule"]
+        if mu is not None
+        else "none: no push is a pure translation",
+        "com_x": centroid,
+        "com_y": centroid,
+        "inertia": f"MIT Push catalogue ({real.shape})",
+    }
+    return truth, source, fric
+
+
+def _filter_rows(model, real: RealPushes, seed: int, num_sigma_points: int | None):
+    """The learned filter over the pushes in order (`_run_filter`): (the report's filter
+    entry, its beliefs [prior, after push 1, …, after push K] (`ParamEstimate`), the pose
+    error at each push's end {"xy_mm", "theta_deg"})."""
+    prior, estimates, pose_err = _run_filter(
+        model, real.records, real.camera, seed, num_sigma_points
+    )
+    row = {
+        "variant": model.variant,
+        "sigma_points": num_sigma_points or model.inference.num_sigma_points,
+        "prior": prior.as_dict(),
+        "per_push": [e.as_dict() for e in estimates],
+    }
+    return row, [prior, *estimates], pose_err
+
+
+def _forest_rows(training, real: RealPushes, trees: int, seed: int):
+    """The random forest fitted on `training` (`_training_features`), predicting from the
+    real pushes' features at their recorded (motion-capture) poses, and the prior mean of the
+    training objects: (the report's forest entry, the forest's means after each push (K, 5),
+    the prior mean (5,)), SI."""
     from pushtoknow.baselines.random_forest import (
         ForestBaseline,
         ForestConfig,
         features_from_records,
     )
     from pushtoknow.evaluation.metrics import PriorMeanPredictor
-    from pushtoknow.models.checkpoint import load_checkpoint
 
-    t0 = time.perf_counter()
-    model = load_checkpoint(Path(model_path))
-    cautions: list[str | None] = []
-    if forest_data is not None:  # first: a bad one fails before any work
-        X, Y, obj_idx = _training_features(Path(forest_data))
-        cautions.append(warn_if_incomplete(Path(forest_data), "--forest-data"))
-    train_speed = model.sim_config.push.speed  # the constant pushes it was trained on
-    with tempfile.TemporaryDirectory(prefix="pushtoknow-mit-") as tmp:
-        target = Path(import_dir) if import_dir is not None else Path(tmp) / "import"
-        ds_dir, conversion = prepare_real_data(
-            data_dir, obj, train_speed if rescale else None, target
-        )
-        real = load_real_object(ds_dir, obj)
-    if import_dir is None and conversion["imported_here"]:
-        conversion["dir"] = None  # a temporary directory, gone
-    records, attrs, camera = real["records"], real["attrs"], real["camera"]
-    if model.camera != camera:
-        raise DatasetError(
-            data_dir,
-            f"rendered with camera {camera}, the model was trained with {model.camera}",
-        )
-    if forest_data is not None and (overlap := forest_overlap(Path(forest_data), real)):
-        warnings.warn(overlap, PushToKnowWarning, stacklevel=2)
-        cautions.append(overlap)
-
-    # ---- reference truth -------------------------------------------------------------------
-    ref = mit_object(real["shape"])
-    fric = friction_reference(records, ref.mass)
-    mu_true = fric["value"]
-    truth = np.array(
-        [ref.mass, np.nan if mu_true is None else mu_true, 0.0, 0.0, ref.inertia], dtype=float
-    )
-    truth_source = {
-        "mass": f"MIT Push catalogue ({real['shape']}, stainless steel)",
-        "friction": "measured from the pushes: " + fric["rule"]
-        if mu_true is not None
-        else "none: no push is a pure translation",
-        "com_x": "footprint centroid (MIT Push objects are uniform)",
-        "com_y": "footprint centroid (MIT Push objects are uniform)",
-        "inertia": f"MIT Push catalogue ({real['shape']})",
+    X, Y, obj_idx = training
+    forest = ForestBaseline(ForestConfig(n_estimators=trees, seed=seed)).fit(X, Y)
+    f_mean, f_std = forest.predict_object(features_from_records(real.records, real.camera))
+    _, first = np.unique(obj_idx, return_index=True)
+    prior_mean = PriorMeanPredictor().fit(Y[first]).mean_
+    row = {
+        "per_push": [_params_dict(m, s) for m, s in zip(f_mean, f_std)],
+        "training_pushes": len(X),
+        "trees": trees,
     }
+    return row, f_mean, prior_mean
 
-    # ---- learned filter ----------------------------------------------------------------------
-    prior, estimates, pose_err = _run_filter(model, records, camera, seed, num_sigma_points)
-    filt_mu_m = [product_moments(e.mean_norm, e.cov_norm) for e in [prior, *estimates]]
 
-    # ---- forest and prior mean -------------------------------------------------------------
-    if forest_data is not None:
-        forest = ForestBaseline(ForestConfig(n_estimators=forest_trees, seed=seed)).fit(X, Y)
-        feats = features_from_records(records, camera)  # recorded (motion-capture) poses
-        f_mean, f_std = forest.predict_object(feats)
-        _, first = np.unique(obj_idx, return_index=True)
-        prior_mean = PriorMeanPredictor().fit(Y[first]).mean_
-
-    # ---- physics-based identification -------------------------------------------------------
-    ident = identify_real(data_dir, real, seed, identify_config) if identify else None
-
-    # ---- errors ------------------------------------------------------------------------------
+def _error_rows(truth, beliefs, forest_means, prior_mean, ident) -> dict:
+    """`_errors` of the filter after each push and of its prior, then (when they ran) of the
+    forest after each push, the prior mean and the identification after each push."""
     errors = {
-        "filter": [_errors(e.mean, truth) for e in estimates],
-        "filter_prior": _errors(prior.mean, truth),
+        "filter": [_errors(e.mean, truth) for e in beliefs[1:]],
+        "filter_prior": _errors(beliefs[0].mean, truth),
     }
-    if forest_data is not None:
-        errors["forest"] = [_errors(m, truth) for m in f_mean]
+    if forest_means is not None:
+        errors["forest"] = [_errors(m, truth) for m in forest_means]
         errors["prior_mean"] = _errors(prior_mean, truth)
     if ident is not None:
         errors["identify"] = [
-            _errors(np.array([p[n]["mean"] for n in PARAM_NAMES]), truth) for p in ident["per_push"]
+            _errors(np.array([p[n]["mean"] for n in PARAM_NAMES]), truth) for p in ident.per_push
         ]
-    mu_m_true = None if mu_true is None else ref.mass * mu_true
+    return errors
+
+
+def _mu_m_rows(truth, beliefs, forest_means, prior_mean, ident) -> dict:
+    """E[μ·m] of the same predictors as `_error_rows` beside its truth (None without a friction
+    truth), and their errors normalised by the catalogue's μ·m range."""
+    mu_m_true = None if np.isnan(truth[1]) else float(truth[0] * truth[1])
 
     def perr(v: float):
         return None if mu_m_true is None else abs(v - mu_m_true) / _product_range()
 
+    moments = [product_moments(e.mean_norm, e.cov_norm) for e in beliefs]
     mu_m = {
         "truth": mu_m_true,
-        "filter_prior": {"mean": filt_mu_m[0][0], "std": filt_mu_m[0][1]},
-        "filter": [{"mean": m, "std": s} for m, s in filt_mu_m[1:]],
+        "filter_prior": {"mean": moments[0][0], "std": moments[0][1]},
+        "filter": [{"mean": m, "std": s} for m, s in moments[1:]],
     }
     mu_m["errors"] = {"filter": [perr(p["mean"]) for p in mu_m["filter"]]}
-    if forest_data is not None:
-        mu_m["forest"] = [float(m[0] * m[1]) for m in f_mean]
+    if forest_means is not None:
+        mu_m["forest"] = [float(m[0] * m[1]) for m in forest_means]
         mu_m["prior_mean"] = float(prior_mean[0] * prior_mean[1])
         mu_m["errors"]["forest"] = [perr(v) for v in mu_m["forest"]]
         mu_m["errors"]["prior_mean"] = perr(mu_m["prior_mean"])
     if ident is not None:
-        mu_m["identify"] = [p["mu_m"] for p in ident["per_push"]]
+        mu_m["identify"] = [p["mu_m"] for p in ident.per_push]
         mu_m["errors"]["identify"] = [perr(p["mean"]) for p in mu_m["identify"]]
+    return mu_m
 
-    # ---- per push summary and notes -----------------------------------------------------------
+
+def _push_rows(real: RealPushes, fric: dict, pose_err: list[dict]) -> list[dict]:
+    """The report's per-push summary (`RealReport.pushes`)."""
     pushes = []
-    for rec, pa, fr, pe in zip(records, attrs, fric["pushes"], pose_err, strict=True):
+    for rec, pa, fr, pe in zip(real.records, real.attrs, fric["pushes"], pose_err, strict=True):
         meta = json.loads(pa["mit_meta"]) if "mit_meta" in pa else {}
         d = rec.pose[-1, :2] - rec.pose[0, :2]
         pushes.append(
@@ -565,44 +663,11 @@ def estimate_real_object(
                 "filter_pose_error_end": pe,
             }
         )
-    notes = _notes(truth, pushes, train_speed, model, mu_true)
-    notes += [c for c in (*cautions, rate_note(real, model)) if c is not None]
-    return RealReport(
-        object=f"{real['surface']}:{real['shape']}",
-        data_dir=str(data_dir),
-        model=str(model_path),
-        forest_data=None if forest_data is None else str(forest_data),
-        seed=seed,
-        conversion=conversion,
-        pushes=pushes,
-        truth={n: (None if np.isnan(v) else float(v)) for n, v in zip(PARAM_NAMES, truth)},
-        truth_source=truth_source,
-        friction_reference=fric,
-        filter={
-            "variant": model.variant,
-            "sigma_points": num_sigma_points or model.inference.num_sigma_points,
-            "prior": prior.as_dict(),
-            "per_push": [e.as_dict() for e in estimates],
-        },
-        forest=None
-        if forest_data is None
-        else {
-            "per_push": [_params_dict(m, s) for m, s in zip(f_mean, f_std)],
-            "training_pushes": len(X),
-            "trees": forest_trees,
-        },
-        identify=ident,
-        prior_mean=None if forest_data is None else _params_dict(prior_mean),
-        errors=errors,
-        mu_m=mu_m,
-        ranges={n: list(PARAM_RANGES[n]) for n in PARAM_NAMES},
-        notes=notes,
-        seconds=time.perf_counter() - t0,
-    )
+    return pushes
 
 
-def identify_real(data_dir: Path, real: dict, seed: int, config=None) -> dict:
-    """`pushtoknow.identification.identify` on the first k real pushes of `real` (an object of
+def identify_real(data_dir: Path, real: RealPushes, seed: int, config=None) -> RealIdentification:
+    """`pushtoknow.identification.identify` on the first k pushes of `real` (an object of
     `load_real_object(data_dir)`), k = 1…K.
 
     The pushes are replayed along their recorded pusher tracks (the pad is the probe: radius
@@ -610,28 +675,22 @@ def identify_real(data_dir: Path, real: dict, seed: int, config=None) -> dict:
     supports under uniform pressure) in the import's footprint and settings, on the recorded
     clock: a push time-rescaled by s at rate r Hz is the recording sampled at r·s Hz, so it is
     replayed at that rate (the import's pushes must share one time scale). The recording has
-    no noise level, so each channel's noise is its misfit (`identify`).
-
-    Returns {"per_push": [{param: {mean, std, interval}, "mu_m": {mean, std, interval},
-    "unidentified", "reduced_chi2", "seconds", "rollouts"}] (after 1…K pushes), "rate_hz",
-    "noise_std" (last fit), "model": text, "notes" (last fit)}."""
+    no noise level, so each channel's noise is its misfit (`identify`)."""
     from pushtoknow.identification.config import IdentifyConfig
     from pushtoknow.identification.fit import identify
     from pushtoknow.identification.recordings import recorded_clock
     from pushtoknow.identification.replay import ReplayScene, RolloutPool
 
-    records, attrs = real["records"], real["attrs"]
+    records = real.records
     try:
         sim = recorded_clock(
-            real["sim_config"], [a.get(TIME_SCALE_ATTR, 1.0) for a in attrs], str(data_dir)
+            real.sim_config, [a.get(TIME_SCALE_ATTR, 1.0) for a in real.attrs], str(data_dir)
         )
     except IdentificationError as e:
         raise DatasetError(data_dir, str(e).split(": ", 1)[1]) from None
     sim = sim.model_copy(update={"render": False})
-    rate = sim.tactile.rate_hz
-    spec = real["spec"]
     cfg = config or IdentifyConfig()
-    scene = ReplayScene(spec.shape, spec.height, sim, stop_at_rest=cfg.stop_at_rest)
+    scene = ReplayScene(real.spec.shape, real.spec.height, sim, stop_at_rest=cfg.stop_at_rest)
     per_push, d = [], {}
     with RolloutPool(cfg.workers) as pool:  # one process pool for every fit
         for k in range(1, len(records) + 1):
@@ -646,20 +705,21 @@ def identify_real(data_dir: Path, real: dict, seed: int, config=None) -> dict:
                     "rollouts": d["rollouts"],
                 }
             )
-    return {
-        "per_push": per_push,
-        "rate_hz": rate,
-        "noise_std": d["noise_std"],
-        "model": (
+    return RealIdentification(
+        per_push=per_push,
+        rate_hz=sim.tactile.rate_hz,
+        noise_std=d["noise_std"],
+        model=(
             f"MuJoCo replay of the recorded pusher tracks: probe radius "
             f"{sim.pad.radius * 1e3:.2f} mm, pad friction {sim.pad.friction:g}, table friction "
             "Coulomb at the testbed's support grid (uniform pressure), footprint as imported"
         ),
-        "notes": d["notes"],
-    }
+        notes=d["notes"],
+    )
 
 
-def _notes(truth, pushes, train_speed, model, mu_true) -> list[str]:
+def _notes(truth, pushes, model, real: RealPushes, cautions: list[str]) -> list[str]:
+    """The report's caveats (module doc), the warnings given (`cautions`) and `rate_note`."""
     notes = [
         "The real object is not one of the training catalogue's objects: its parameters are "
         "compared with the catalogue ranges below, not with grid values."
@@ -670,11 +730,12 @@ def _notes(truth, pushes, train_speed, model, mu_true) -> list[str]:
         lo, hi = PARAM_RANGES[n]
         where = "inside" if lo <= v <= hi else "OUTSIDE"
         notes.append(f"{n} truth {v:.4g} is {where} the catalogue range [{lo:.4g}, {hi:.4g}] (SI)")
-    if mu_true is None:
+    if np.isnan(truth[1]):
         notes.append(
             f"friction truth: no push is a pure translation (|rotation| < "
             f"{PURE_TRANSLATION_DEG} deg), so friction has no reference and no error"
         )
+    train_speed = model.sim_config.push.speed
     speeds = sorted({round(p["speed_m_per_s"], 6) for p in pushes})
     if any(abs(v - train_speed) > 1e-6 for v in speeds):
         notes.append(
@@ -692,4 +753,5 @@ def _notes(truth, pushes, train_speed, model, mu_true) -> list[str]:
         "docs/PHYSICS.md: quasi-static pushing reveals μ·m (force) and the CoM (motion), not m and "
         "μ separately, and I_z barely: compare μ·m rather than mass or friction alone"
     )
-    return notes
+    rate = rate_note(real, model)
+    return notes + cautions + ([] if rate is None else [rate])

@@ -42,6 +42,7 @@ their spread (max − min) / mean: one surface has one μ, a check that needs no
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import time
 from collections.abc import Sequence
@@ -53,6 +54,7 @@ from scipy.special import ndtri
 
 from pushtoknow.common.errors import DatasetError, PushToKnowError
 from pushtoknow.common.estimators import ESTIMATOR_NAMES
+from pushtoknow.common.files import find_files
 from pushtoknow.common.params import PARAM_NAMES, product_moments
 from pushtoknow.datasets.mit_push import (
     DEFAULT_RATE_HZ,
@@ -63,6 +65,7 @@ from pushtoknow.datasets.mit_push import (
     mit_object,
     read_mit_push,
 )
+from pushtoknow.identification.prior import EVERYDAY_PRIOR, PriorRanges
 from pushtoknow.testbed.config import SimConfig
 from pushtoknow.testbed.sim import PushRecord
 
@@ -157,7 +160,8 @@ class RealObject:
     settings (clock, pad radius); shape / height: the known outline (polygon spec, object frame,
     m) or None; truth (5,) SI, NaN where unknown; image_records: the pushes with RGB-D for the
     learned filter and the forest (None: none, `image_note` says why); skipped: pushes left
-    out, each {"file", "reason"}; friction_reference: `friction_reference`'s dict (MIT only).
+    out, each {"file", "reason"}; friction_reference: `friction_reference`'s dict (MIT only);
+    prior: the ranges of m, μ and I_z the physics filter starts from.
     """
 
     key: str
@@ -177,6 +181,7 @@ class RealObject:
     skipped: tuple[dict, ...] = ()
     friction_reference: dict | None = None
     notes: tuple[str, ...] = ()
+    prior: PriorRanges = EVERYDAY_PRIOR
 
 
 def _group_mit(root: Path) -> dict[tuple[str, str], list[tuple[Path, MitPushMeta]]]:
@@ -292,14 +297,11 @@ def _recorded_objects(root: Path, max_pushes: int | None, images: bool) -> list[
 
     out: list[RealObject] = []
     camera = None
-    shards = sorted(p for p in root.rglob(SHARD_GLOB) if p.is_file())
+    shards = find_files(root, SHARD_GLOB)
     recordings = sorted(
         p
-        for p in root.rglob("*.h5")
-        if p.is_file()
-        and not p.name.startswith(FILE_PREFIX)
-        and p not in shards
-        and is_recording(p)
+        for p in find_files(root, "*.h5")
+        if not p.name.startswith(FILE_PREFIX) and p not in shards and is_recording(p)
     )
     for path in recordings:
         (obj,) = load_recorded_objects(path)
@@ -359,6 +361,7 @@ def _generic(
         image_camera=camera,
         image_note=note,
         notes=tuple(obj.notes),
+        prior=obj.prior,
     )
 
 
@@ -422,8 +425,10 @@ def find_real_objects(
 # ============================================================================================
 # Estimators
 # ============================================================================================
-def _physics(model, obj: RealObject, seed: int):
-    """(prior, final estimate, per-push diagnostics) of the physics filter on `obj`."""
+def _physics(model, obj: RealObject, seed: int, prior: PriorRanges | None = None):
+    """(prior, final estimate, per-push diagnostics) of the physics filter on `obj`, starting
+    from `prior` (None: the object's, `RealObject.prior`)."""
+    from pushtoknow.identification.recursive import PhysicsFilterConfig
     from pushtoknow.identification.replay import ReplayScene
     from pushtoknow.inference.estimator import InferenceConfig
     from pushtoknow.inference.physics_filter import PhysicsFilterEstimator
@@ -432,7 +437,9 @@ def _physics(model, obj: RealObject, seed: int):
     cfg = InferenceConfig(estimator="physics", pushes=len(obj.records))
     sim = obj.sim_config.model_copy(update={"render": False})
     scene = None if obj.shape is None else ReplayScene(obj.shape, obj.height, sim)
-    est = PhysicsFilterEstimator(model, cfg, seed, obj.sim_config, scene=scene)
+    ranges = prior or obj.prior
+    filter_config = PhysicsFilterConfig(prior=ranges)
+    est = PhysicsFilterEstimator(model, cfg, seed, obj.sim_config, filter_config, scene=scene)
     try:
         res = infer_recorded(
             model, list(obj.records), cfg, seed, None, obj.key, estimator=est,
@@ -451,7 +458,11 @@ def _physics(model, obj: RealObject, seed: int):
         }
         for u in est.updates
     ]
-    return res.prior, res.estimates[-1], {"updates": updates}
+    return (
+        res.prior,
+        res.estimates[-1],
+        {"prior": ranges.model_dump(mode="json"), "updates": updates},
+    )
 
 
 def _learned(model, obj: RealObject, seed: int):
@@ -481,10 +492,10 @@ def _forest_model(forest_data: Path, seed: int, trees: int):
     if not forest_data.is_dir():
         raise DatasetError(forest_data, "--forest-data: no such dataset folder")
     info = dataset_info(forest_data)
-    if info["complete"] is False:
+    if info.complete is False:
         raise DatasetError(
             forest_data,
-            f"forest data incomplete: {info['objects']} of {info['expected_objects']} objects "
+            f"forest data incomplete: {info.objects} of {info.expected_objects} objects "
             "(resume it with `pushtoknow simulate`)",
         )
     X, Y, _ = _training_features(forest_data)
@@ -592,6 +603,38 @@ class RealBenchmark:
         )
         return "\n".join(out) + "\n"
 
+    def results_section(self, command: str) -> str:
+        """A RESULTS.md section of this benchmark: the command, what ran, the tables, notes,
+        per-object physics fit quality and the time."""
+        lines = [
+            "## Real objects (`evaluate-real`)",
+            "",
+            "Generated by:",
+            "",
+            f"    {command}",
+            "",
+            f"{len(self.objects)} objects, seed {self.seed}, estimators "
+            f"{', '.join(self.estimators)}; {self.seconds / 60:.1f} min on this machine.",
+            "",
+            self.table(),
+        ]
+        fits = []
+        for key, o in self.objects.items():
+            ups = (o.get("physics") or {}).get("updates") or []
+            if ups:
+                chi2 = [u["reduced_chi2"] for u in ups]
+                poor = sum(u["poor_fit"] for u in ups)
+                fits.append(
+                    f"- {key}: physics filter, {len(ups)} updates, reduced χ² "
+                    f"{min(chi2):.1f}–{max(chi2):.1f}, {poor} poor fits (m at fixed μ·m and "
+                    "I_z then keep the prior)"
+                )
+        if fits:
+            lines += ["", *fits]
+        if self.notes:
+            lines += ["", *(f"- {n}" for n in self.notes)]
+        return "\n".join(lines) + "\n"
+
 
 def _surfaces(objects: dict) -> dict:
     by: dict[str, list[str]] = {}
@@ -632,10 +675,13 @@ def evaluate_real(
     model: str | Path = "pretrained",
     forest_trees: int = 200,
     progress=None,
+    prior: PriorRanges | None = None,
 ) -> RealBenchmark:
     """Every estimator on every object under `data_dir` (module doc). model: the perception /
     learned-filter checkpoint ("pretrained" or a run directory); max_pushes: the first K
-    accepted pushes of each object; progress(text): told as each method starts.
+    accepted pushes of each object; progress(text): told as each method starts; prior: the
+    ranges the physics filter's prior spreads m, μ and I_z over (None: each object's,
+    everyday objects' for real ones).
     Raises `DatasetError` (no objects, a bad file, incomplete forest data) or
     `CheckpointError`."""
     from pushtoknow.baselines.random_forest import features_from_records
@@ -657,7 +703,7 @@ def evaluate_real(
     train_speed = trained.sim_config.push.speed if images else None
     found, empty = find_real_objects(Path(data_dir), max_pushes, train_speed)
     say = progress or (lambda text: None)
-    runners = {"physics": _physics, "vt-addf": _learned}
+    runners = {"physics": functools.partial(_physics, prior=prior), "vt-addf": _learned}
     objects = {}
     for obj in found:
         methods, mu_m, skipped_methods, seconds, extra = {}, {}, {}, {}, {}

@@ -7,6 +7,7 @@ import math
 from pydantic import Field
 
 from pushtoknow.common.config import Config
+from pushtoknow.identification.prior import CATALOGUE_PRIOR, PriorRanges
 
 
 class IdentifyConfig(Config):
@@ -18,6 +19,10 @@ class IdentifyConfig(Config):
     resolution and the testbed's start-pose sensitivity, docs/PHYSICS.md: ≤ 0.23 mm / 0.27°).
     """
 
+    prior: PriorRanges = Field(
+        CATALOGUE_PRIOR,
+        description="ranges of m, μ and I_z the prior spreads over (`prior.PriorRanges`)",
+    )
     force_noise: float | None = Field(None, gt=0, description="N; None: the recording's")
     position_noise: float = Field(5e-4, gt=0, description="m, per pose sample")
     angle_noise: float = Field(math.radians(0.5), gt=0, description="rad, per pose sample")

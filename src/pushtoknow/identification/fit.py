@@ -70,12 +70,15 @@ from pushtoknow.identification.replay import (
 from pushtoknow.identification.residuals import ReplayResiduals
 from pushtoknow.testbed.config import SimConfig, check_testbed_version
 from pushtoknow.testbed.objects import COM_MARGIN
-from pushtoknow.testbed.push import Push, pad_positions
+from pushtoknow.testbed.push import pad_positions
 from pushtoknow.testbed.sim import PushRecord
 
 TRACK_TOLERANCE = 1e-3  # m: a recorded pad track may depart this far from its commanded profile
 LEVEL = 0.9
 QUASI_STATIC_SPEED = 0.2  # m/s: constant pushes up to this speed are quasi-static
+# m/s²: a recorded pad that accelerates more carries m in its force (m·a at least 5% of the
+# friction μ·m·g at μ = 1)
+QUASI_STATIC_ACCEL = 0.05 * GRAVITY
 QUASI_STATIC_BLIND = [1, 4]  # fit coordinates they do not reveal: log m at fixed μ·m, log I_z
 UNKNOWN_FORCE_NOISE = 0.1  # N: first guess for a recording without a noise level (real data)
 NOISE_FLOOR_SHARE = 1e-2  # an estimated noise level stays above this share of its first guess
@@ -264,9 +267,19 @@ def closed_form_start(records: Sequence[PushRecord], sim_config: SimConfig) -> d
     return {"mu_m": mu_m, "mass": mass, "friction": friction}
 
 
-def is_quasi_static(push: Push) -> bool:
-    """Whether a push is quasi-static: constant, at most `QUASI_STATIC_SPEED`."""
-    return push.profile == "constant" and push.speed <= QUASI_STATIC_SPEED
+def is_quasi_static(track: PushTrack, rate: float) -> bool:
+    """Whether a push is quasi-static: constant, at most `QUASI_STATIC_SPEED`, and, replayed
+    along a recorded pad track sampled at `rate` (Hz), never accelerating by more than
+    `QUASI_STATIC_ACCEL` (its start from rest included: a real pusher that starts touching
+    the object accelerates it, and m·a is there in the force)."""
+    push = track.push
+    if push.profile != "constant" or push.speed > QUASI_STATIC_SPEED:
+        return False
+    if track.pad is None:
+        return True
+    velocity = np.diff(np.asarray(track.pad, dtype=np.float64), axis=0) * rate  # (T-1, 2)
+    steps = np.diff(np.vstack([np.zeros((1, 2)), velocity]), axis=0) * rate
+    return float(np.max(np.linalg.norm(steps, axis=1), initial=0.0)) <= QUASI_STATIC_ACCEL
 
 
 def without_blind(h_data: np.ndarray) -> np.ndarray:
@@ -455,14 +468,15 @@ def fit_problem(
     """The residual stage: the noise model, the replay residuals of `tracks` (K) and the MAP
     objective over the fit coordinates, with the prior (module doc)."""
     cfg = config
-    quasi_static = cfg.quasi_static_rule and all(is_quasi_static(t.push) for t in tracks)
+    rate = scene.sim_config.tactile.rate_hz
+    quasi_static = cfg.quasi_static_rule and all(is_quasi_static(t, rate) for t in tracks)
     recorded_noise = scene.sim_config.tactile.force_noise_std
     noise_unknown = cfg.force_noise is None and recorded_noise == 0.0
     sigma_f = cfg.force_noise or (UNKNOWN_FORCE_NOISE if noise_unknown else recorded_noise)
     sigmas = np.array([sigma_f, sigma_f, cfg.position_noise, cfg.position_noise, cfg.angle_noise])
     rollouts_before, push_rollouts_before = pool.rollouts, pool.push_rollouts
     tmat = fit_transform()
-    z_prior, p_z = prior_moments()
+    z_prior, p_z = prior_moments(cfg.prior)
     u_prior = tmat @ z_prior
     p_u = tmat @ p_z @ tmat.T
     p_u_inv = np.linalg.inv(p_u)

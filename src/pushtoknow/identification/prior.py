@@ -15,8 +15,12 @@ direction separately.
 
 from __future__ import annotations
 
-import numpy as np
+from typing import Annotated
 
+import numpy as np
+from pydantic import AfterValidator
+
+from pushtoknow.common.config import Config
 from pushtoknow.common.params import (
     LOG_PARAMS,
     PARAM_NAMES,
@@ -25,6 +29,7 @@ from pushtoknow.common.params import (
     normalise_param,
     space_scale,
 )
+from pushtoknow.testbed.objects import FRICTION_LIMIT, MAX_MASS
 
 
 def _log_uniform_moments(a: float, b: float) -> tuple[float, float]:
@@ -41,14 +46,64 @@ def _log_uniform_moments(a: float, b: float) -> tuple[float, float]:
     return float(m1), float(m2 - m1 * m1)
 
 
-def prior_moments() -> tuple[np.ndarray, np.ndarray]:
-    """Mean (5,) and covariance (5, 5) over the normalised parameters of φ uniform over the
-    catalogue ranges (independent parameters)."""
+def _range(name: str, lo_min: float, hi_max: float):
+    """A validator of a (low, high) prior range of `name` within [lo_min, hi_max]."""
+
+    def check(v: tuple[float, float]) -> tuple[float, float]:
+        lo, hi = v
+        if not (lo_min <= lo < hi <= hi_max):
+            raise ValueError(
+                f"prior {name} range {lo:g}–{hi:g} must satisfy {lo_min:g} ≤ low < high ≤ "
+                f"{hi_max:g}"
+            )
+        return float(lo), float(hi)
+
+    return check
+
+
+class PriorRanges(Config):
+    """Where the prior puts m, μ and I_z: each uniform over its (low, high) range (kg, –,
+    kg·m²); the CoM is uniform over the footprint (`footprint_prior`) or, with no footprint,
+    over the catalogue's range. The default: the testbed catalogue's ranges
+    (`common.params.PARAM_RANGES`), which simulated objects are drawn from; `EVERYDAY_PRIOR`
+    covers everyday objects and surfaces (real recordings)."""
+
+    mass: Annotated[tuple[float, float], AfterValidator(_range("mass", 1e-3, MAX_MASS))] = (
+        PARAM_RANGES["mass"]
+    )
+    friction: Annotated[
+        tuple[float, float], AfterValidator(_range("friction", 1e-3, FRICTION_LIMIT))
+    ] = PARAM_RANGES["friction"]
+    inertia: Annotated[tuple[float, float], AfterValidator(_range("inertia", 1e-8, 10.0))] = (
+        PARAM_RANGES["inertia"]
+    )
+
+    def range_of(self, name: str) -> tuple[float, float]:
+        """The (low, high) range of parameter `name` (`common.params.PARAM_NAMES`)."""
+        return (
+            getattr(self, name) if name in ("mass", "friction", "inertia") else PARAM_RANGES[name]
+        )
+
+    def label(self) -> str:
+        """One line: 'm 0.05–5 kg, μ 0.05–1.2, I_z 1e-05–0.05 kg·m²'."""
+        (m0, m1), (f0, f1), (i0, i1) = self.mass, self.friction, self.inertia
+        return f"m {m0:g}–{m1:g} kg, μ {f0:g}–{f1:g}, I_z {i0:g}–{i1:g} kg·m²"
+
+
+CATALOGUE_PRIOR = PriorRanges()
+# everyday objects and surfaces: 50 g–5 kg; μ from PTFE-like (0.05) to rubber (1.2); I_z from a
+# 50 g, 3 cm puck to a 5 kg, 30 cm plate
+EVERYDAY_PRIOR = PriorRanges(mass=(0.05, 5.0), friction=(0.05, 1.2), inertia=(5e-6, 0.08))
+
+
+def prior_moments(ranges: PriorRanges = CATALOGUE_PRIOR) -> tuple[np.ndarray, np.ndarray]:
+    """Mean (5,) and covariance (5, 5) over the normalised parameters of φ uniform over
+    `ranges` (independent parameters)."""
     scale = space_scale()
     mean = np.zeros(len(PARAM_NAMES))
     var = np.zeros(len(PARAM_NAMES))
     for i, k in enumerate(PARAM_NAMES):
-        a, b = PARAM_RANGES[k]
+        a, b = ranges.range_of(k)
         if k in LOG_PARAMS:
             m, v = _log_uniform_moments(a, b)
             mean[i] = normalise_param(k, float(np.exp(m)))
@@ -98,15 +153,15 @@ def polygon_moments(vertices: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def footprint_prior(
-    com_region: np.ndarray, gyration_radius: float
+    com_region: np.ndarray, gyration_radius: float, ranges: PriorRanges = CATALOGUE_PRIOR
 ) -> tuple[np.ndarray, np.ndarray]:
     """Mean (5,) and covariance (5, 5) over the normalised parameters of an object whose
-    footprint is seen: m and μ as `prior_moments`; the CoM uniform over `com_region` (V, 2),
+    footprint is seen: m and μ as `prior_moments(ranges)`; the CoM uniform over `com_region` (V, 2),
     the footprint's convex hull less the testbed's margin (where any mass distribution puts
     it); log I_z = log m + 2 log k, k the footprint's uniform-plate radius of gyration
     `gyration_radius` (m) times a log-normal factor of std `GYRATION_SPREAD`. Normalised values
     of a CoM or I_z beyond the catalogue ranges lie beyond ±1."""
-    mean, cov = prior_moments()
+    mean, cov = prior_moments(ranges)
     scale = space_scale()
     i_m, i_cx, i_iz = (
         PARAM_NAMES.index("mass"),

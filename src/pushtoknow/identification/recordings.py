@@ -15,6 +15,7 @@ import yaml
 
 from pushtoknow.common.config import read_utf8
 from pushtoknow.common.errors import DatasetError, IdentificationError, ObjectSpecError
+from pushtoknow.identification.prior import CATALOGUE_PRIOR, EVERYDAY_PRIOR, PriorRanges
 from pushtoknow.identification.replay import ReplayScene
 from pushtoknow.testbed.config import SimConfig, stored_sim_config
 from pushtoknow.testbed.objects import NOVEL_SHAPES, recentred_legacy_shape, resolve_shape
@@ -35,7 +36,9 @@ class RecordedObject:
     recording of a real object stores its catalogue values; NaN where a recording does not
     know one) or None; sim_config: the settings the pushes were recorded with (for a recording
     or bag: the testbed's, with its clock, pad radius, force noise and push length); notes:
-    what the reader changed (a resampling, a moved object frame)."""
+    what the reader changed (a resampling, a moved object frame); prior: the ranges of m, μ
+    and I_z to start from (`prior.CATALOGUE_PRIOR` for objects the testbed drew and simulated,
+    `prior.EVERYDAY_PRIOR` for real ones: recordings, bags, imported MIT Push pushes)."""
 
     name: str
     index: int
@@ -45,6 +48,7 @@ class RecordedObject:
     records: tuple[PushRecord, ...]
     sim_config: SimConfig
     notes: tuple[str, ...] = ()
+    prior: PriorRanges = EVERYDAY_PRIOR
 
 
 def _shard_paths(path: Path) -> list[Path]:
@@ -112,7 +116,12 @@ def recording_object(path: Path, meta: RecordingMeta, records: list[PushRecord])
     def settings(samples: int) -> SimConfig:
         return base.model_copy(
             update={
-                "pad": base.pad.model_copy(update={"radius": float(meta.pusher_radius)}),
+                "pad": base.pad.model_copy(
+                    update={
+                        "radius": float(meta.pusher_radius),
+                        "friction": float(meta.pusher_friction),
+                    }
+                ),
                 "tactile": base.tactile.model_copy(
                     update={"rate_hz": rate, "force_noise_std": float(meta.force_noise_std or 0.0)}
                 ),
@@ -196,6 +205,9 @@ def load_recorded_objects(
                         truth=truth,
                         records=records,
                         sim_config=recorded_clock(sim_config, scales, f"{shard} object {key}"),
+                        prior=EVERYDAY_PRIOR
+                        if any(TIME_SCALE_ATTR in pushes[k].attrs for k in keys)
+                        else CATALOGUE_PRIOR,
                     )
                 )
     if not out:

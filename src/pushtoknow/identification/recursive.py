@@ -38,6 +38,7 @@ from pushtoknow.identification.fit import (
     without_blind,
 )
 from pushtoknow.identification.optimise import DescentSettings, Objective, levenberg_marquardt
+from pushtoknow.identification.prior import CATALOGUE_PRIOR, PriorRanges
 from pushtoknow.identification.replay import PushTrack, ReplayScene, RolloutPool
 from pushtoknow.identification.residuals import (
     OFFSET_UNIT,
@@ -54,6 +55,10 @@ class PhysicsFilterConfig(Config):
     (perception's accuracy), the force with the recording's noise (`force_noise` None: the
     tactile noise of the simulation settings, 0.1 N where those have none)."""
 
+    prior: PriorRanges = Field(
+        CATALOGUE_PRIOR,
+        description="ranges of m, μ and I_z the prior spreads over (`prior.PriorRanges`)",
+    )
     force_noise: float | None = Field(None, gt=0, description="N; None: the recording's")
     position_noise: float = Field(2e-3, gt=0, description="m, per pose sample")
     angle_noise: float = Field(math.radians(2.5), gt=0, description="rad, per pose sample")
@@ -288,7 +293,7 @@ def _update_once(
     w = np.concatenate([huber_weights(r_w[:n], cfg.huber, res.robust), np.ones(len(r) - n)])
     h_data = jac_w[:n].T @ (w[:n, None] * jac_w[:n])
     poor = chi2 > cfg.poor_fit_chi2
-    if is_quasi_static(track.push) or poor:
+    if is_quasi_static(track, scene.sim_config.tactile.rate_hz) or poor:
         # a quasi-static push reveals neither m at fixed μ·m nor I_z (docs/DESIGN.md §10); a
         # push the replay cannot reproduce reads them off accelerations and spin-downs it
         # does not match
@@ -344,7 +349,7 @@ def expected_information(
         sims = res.standardise(sims / res.sigmas, weights)
         jac = ((sims[1:] - sims[0][None]) / fd[:, None, None]).reshape(5, -1).T
         h = jac.T @ jac
-        if is_quasi_static(track.push):
+        if is_quasi_static(track, scene.sim_config.tactile.rate_hz):
             h = without_blind(h)
         white = chol.T @ h @ chol
         sign, logdet = np.linalg.slogdet(np.eye(5) + 0.5 * (white + white.T))

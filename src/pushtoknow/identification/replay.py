@@ -10,30 +10,40 @@ profile from the recorded pad start `pusher[0]`, so the fit sees exactly the exe
 pad joints' qpos and qvel at every physics step and refines the step during a release push's
 dynamic phase, which rollout's control vector cannot express without changing the physics
 (a mocap pad has no velocity in the contact Jacobian). `mujoco.sysid` (also shipped) builds on
-rollout with actuated models, and does not import here (its optional dependency absl is
-missing). So the batch runs the testbed's own `PushSimulator` in a process pool, one task per
-(φ, push).
+rollout with actuated models; `identification.sysid_baseline` fits with it as a baseline, its
+pad servo-driven (a slightly different model: see there). So the batch runs the testbed's own
+`PushSimulator` in a process pool, one task per (φ, push).
 """
 
 from __future__ import annotations
 
+import json
+from collections import OrderedDict
 from dataclasses import dataclass
 
 import numpy as np
-from shapely.geometry import Point
+from shapely.geometry import Point, Polygon
 from shapely.ops import nearest_points
 
 from pushtoknow.common.errors import IdentificationError, PushToKnowError
 from pushtoknow.common.parallel import LocalRunner, TaskRunner, Workers
 from pushtoknow.common.params import ObjectParams
 from pushtoknow.testbed.config import SimConfig
-from pushtoknow.testbed.objects import COM_MARGIN, MAX_MASS, MIN_GYRATION_RADIUS, ObjectSpec
+from pushtoknow.testbed.objects import (
+    COM_MARGIN,
+    FRICTION_LIMIT,
+    MAX_MASS,
+    MIN_GYRATION_RADIUS,
+    ObjectSpec,
+)
 from pushtoknow.testbed.push import Push
+from pushtoknow.testbed.scene import mass_layout
 from pushtoknow.testbed.shapes import Footprint, footprint_from_shape
+from pushtoknow.testbed.sim import PushSimulator
 
 COM_INSET = 2e-4  # m: candidates keep the CoM this far inside the valid region (rounding)
 INERTIA_SHARE = 0.999  # candidates keep I_z below this share of the footprint's bound
-MAX_FRICTION = 1.99  # the testbed refuses Coulomb coefficients above 2
+MAX_FRICTION = 0.995 * FRICTION_LIMIT  # candidates keep μ just below what the testbed refuses
 
 
 @dataclass(frozen=True)
@@ -74,13 +84,26 @@ class ReplayScene:
         return footprint_from_shape(self.shape)
 
 
+def carried_region(footprint: Footprint) -> Polygon:
+    """Where the testbed's supports can carry a candidate's CoM: the footprint's convex hull
+    less `COM_MARGIN`, and within the convex hull of the footprint shrunk by it (its largest
+    piece), whose outline the supports line (`scene.support_points`; a sliver or spike thinner
+    than twice the margin, as a traced outline can have, holds no support), less
+    `COM_INSET`."""
+    shrunk = footprint.polygon.buffer(-COM_MARGIN)
+    if shrunk.geom_type != "Polygon":
+        shrunk = max(shrunk.geoms, key=lambda g: g.area)
+    region = footprint.com_region(COM_MARGIN).intersection(shrunk.convex_hull).buffer(-COM_INSET)
+    return region if not region.is_empty else footprint.com_region(COM_MARGIN + COM_INSET)
+
+
 def feasible(phi: np.ndarray, footprint: Footprint) -> tuple[np.ndarray, float, float]:
     """The nearest simulable φ (5,) SI: CoM inside the footprint by the testbed's margin, I_z
     between the least the testbed simulates and the most this footprint allows, μ below the
     testbed's limit. Returns (φ, CoM moved
     (m), excess: Σ (value / bound − 1) over I_z and μ where above their bound)."""
     phi = np.array(phi, dtype=np.float64)
-    region = footprint.com_region(COM_MARGIN + COM_INSET)
+    region = carried_region(footprint)
     c = Point(phi[2], phi[3])
     moved = 0.0
     if not region.contains(c):
@@ -99,28 +122,50 @@ def feasible(phi: np.ndarray, footprint: Footprint) -> tuple[np.ndarray, float, 
     return phi, moved, excess
 
 
+COMPILED_SCENES = 16  # compiled scenes each process keeps (`compiled_simulator`)
+_compiled: OrderedDict[tuple, PushSimulator] = OrderedDict()
+
+
+def compiled_simulator(scene: ReplayScene, params: ObjectParams) -> PushSimulator:
+    """A simulator of the scene's outline holding `params`: a compiled scene of this process
+    with the same outline, height, settings and supports carrying load, given `params` by
+    `PushSimulator.set_params` (bit-identical to a fresh build), or a new one, kept for the
+    next replays (the `COMPILED_SCENES` most recently used)."""
+    spec = ObjectSpec(shape=scene.shape, params=params, height=scene.height)
+    layout = mass_layout(spec, scene.sim_config)
+    key = (
+        json.dumps(scene.shape, sort_keys=True),
+        scene.height,
+        scene.sim_config.model_dump_json(),
+        np.round(layout.points, 6).tobytes(),
+    )
+    sim = _compiled.get(key)
+    if sim is not None and sim.set_params(params, layout):
+        _compiled.move_to_end(key)
+        return sim
+    sim = PushSimulator(spec, scene.sim_config)
+    _compiled[key] = sim
+    while len(_compiled) > COMPILED_SCENES:
+        _compiled.popitem(last=False)[1].close()
+    return sim
+
+
 def simulate_track(scene: ReplayScene, phi: np.ndarray, track: PushTrack) -> np.ndarray:
     """Replay one push for a simulable φ (5,) SI. Returns (T, 5): noiseless force (F_x, F_y) and
     pose (x, y, θ) in the record's frame."""
-    from pushtoknow.testbed.sim import PushSimulator
-
-    spec = ObjectSpec(shape=scene.shape, params=ObjectParams.from_array(phi), height=scene.height)
-    sim = PushSimulator(spec, scene.sim_config)
-    try:
-        dx, dy = scene.frame_offset
-        x, y, th = map(float, track.pose0)
-        c, s = np.cos(th), np.sin(th)
-        sim.reset((x + c * dx - s * dy, y + s * dx + c * dy, th))
-        rec = sim.execute(
-            track.push,
-            np.random.default_rng(0),
-            render=False,
-            start=track.start,
-            stop_at_rest=scene.stop_at_rest,
-            pad_track=track.pad,
-        )
-    finally:
-        sim.close()
+    sim = compiled_simulator(scene, ObjectParams.from_array(phi))
+    dx, dy = scene.frame_offset
+    x, y, th = map(float, track.pose0)
+    c, s = np.cos(th), np.sin(th)
+    sim.reset((x + c * dx - s * dy, y + s * dx + c * dy, th))
+    rec = sim.execute(
+        track.push,
+        np.random.default_rng(0),
+        render=False,
+        start=track.start,
+        stop_at_rest=scene.stop_at_rest,
+        pad_track=track.pad,
+    )
     pose = rec.pose.copy()
     if dx or dy:
         c, s = np.cos(pose[:, 2]), np.sin(pose[:, 2])

@@ -103,7 +103,7 @@ class PhysicsFilterEstimator(Estimator):
         self.camera = model.camera
         self.tmat = fit_transform()
         self.t_inv = np.linalg.inv(self.tmat)
-        z, p_z = prior_moments()
+        z, p_z = prior_moments(self.filter_config.prior)
         self.mean = self.tmat @ z
         self.cov = self.prior_cov = self.tmat @ p_z @ self.tmat.T
         self.scene: ReplayScene | None = None
@@ -186,7 +186,9 @@ class PhysicsFilterEstimator(Estimator):
             return  # too thin for the margin: the catalogue prior stays
         _, plate = polygon_moments(scene.footprint.vertices)
         z, p_z = footprint_prior(
-            np.asarray(region.exterior.coords)[:-1], float(np.sqrt(np.trace(plate)))
+            np.asarray(region.exterior.coords)[:-1],
+            float(np.sqrt(np.trace(plate))),
+            self.filter_config.prior,
         )
         self.mean = self.tmat @ z
         self.cov = self.prior_cov = self.tmat @ p_z @ self.tmat.T

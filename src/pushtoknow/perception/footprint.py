@@ -182,6 +182,8 @@ def sharpen_corners(contour: np.ndarray) -> np.ndarray:
             if _rounded_corner(x, turn, traced):
                 corner = x
         out.extend([corner] if corner is not None else chain)
+    if len(out) < 3:  # two straight edges meeting at both ends: no polygon, keep the trace
+        return v
     poly = Polygon(out)
     if not poly.is_valid or abs(poly.area / Polygon(pts).area - 1.0) > 0.15:
         return v

@@ -1,6 +1,6 @@
-"""The real-data report (`RealReport`, made by `evaluation.real.estimate_real_object`) and its
-tables: the estimates after each push beside the truth, the normalised errors, and the notes,
-as markdown."""
+"""The real-data report (`RealReport`, made by `evaluation.real.estimate_real_object`, with
+its `RealIdentification`) and its tables: the estimates after each push beside the truth, the
+normalised errors, and the notes, as markdown."""
 
 from __future__ import annotations
 
@@ -14,32 +14,70 @@ from pushtoknow.reporting.units import labelled
 
 
 @dataclass(frozen=True)
-class RealReport:
-    """What `evaluation.real.estimate_real_object` found on one real object, SI throughout
-    (field by field in its docstring); `to_json()` gives the JSON `estimate-real` prints."""
+class RealIdentification:
+    """`evaluation.real.identify_real`: the physics-based fits of the first k real pushes,
+    k = 1…K, SI; `to_json()` gives its entry of the `estimate-real` JSON."""
 
-    object: str
-    data_dir: str
-    model: str
-    forest_data: str | None
-    seed: int
-    conversion: dict
-    pushes: list[dict]
-    truth: dict[str, float | None]
-    truth_source: dict[str, str]
-    friction_reference: dict
-    filter: dict
-    forest: dict | None
-    identify: dict | None
-    prior_mean: dict[str, float] | None
-    errors: dict
-    mu_m: dict
-    ranges: dict[str, list[float]]
-    notes: list[str]
-    seconds: float
+    # after each k: {param: {mean, std, interval}, "mu_m": {mean, std, interval},
+    # "unidentified" (parameters left at their prior width), "reduced_chi2", "seconds",
+    # "rollouts"}
+    per_push: list[dict]
+    rate_hz: float  # the replay rate: the recorded clock
+    noise_std: dict  # the last fit's noise per channel, estimated from its misfit
+    model: str  # the replay, in words
+    notes: list[str]  # the last fit's
 
     def to_json(self) -> dict:
         return {f.name: getattr(self, f.name) for f in fields(self)}
+
+
+@dataclass(frozen=True)
+class RealReport:
+    """What `evaluation.real.estimate_real_object` found on one real object, SI throughout;
+    `to_json()` gives the JSON `estimate-real` prints (the fields in order). An error is
+    |estimate − truth| / (catalogue max − min) per parameter (None without a truth), with
+    "overall" the mean over the parameters with a truth; a μ·m error is normalised by the
+    catalogue's range of μ·m. Rows "forest" and "prior_mean" are there only with forest data,
+    rows "identify" only when the identification ran."""
+
+    object: str  # "surface:shape"
+    data_dir: str
+    model: str  # checkpoint or run directory
+    forest_data: str | None
+    seed: int
+    # {"imported_here", "dir" (None: a temporary import), "as_speed_m_per_s" (None: not
+    # rescaled), and when imported here "source", "files"} (`prepare_real_data`)
+    conversion: dict
+    # per push: {"file", "speed_m_per_s" (as labelled), "file_speed_m_per_s", "time_scale",
+    # "samples", "displacement_m", "rotation_deg", "pure_translation", "mu_contact_phase",
+    # "filter_pose_error_end": {"xy_mm", "theta_deg"}}
+    pushes: list[dict]
+    truth: dict[str, float | None]  # {param: value}; friction None when no push qualifies
+    truth_source: dict[str, str]  # {param: where its truth comes from}
+    friction_reference: dict  # `evaluation.real.friction_reference`'s
+    # {"variant", "sigma_points", "prior": {param: {mean, std}}, "per_push": [the same after
+    # each push]}
+    filter: dict
+    # {"per_push": [{param: {mean, std}} after each push], "training_pushes", "trees"}
+    forest: dict | None
+    identify: RealIdentification | None
+    prior_mean: dict[str, float] | None  # {param: mean over the forest data's objects}
+    # {"filter": [{param: error, "overall"} after each push], "filter_prior": {…},
+    # "forest": […], "prior_mean": {…}, "identify": […]}
+    errors: dict
+    # {"truth", "filter_prior": {mean, std}, "filter": [{mean, std} after each push],
+    # "errors": {"filter", "forest", "prior_mean", "identify"}, "forest": [after each push],
+    # "prior_mean", "identify": [{mean, std, interval} after each push]}
+    mu_m: dict
+    ranges: dict[str, list[float]]  # {param: [lo, hi]} of the catalogue
+    notes: list[str]  # caveats
+    seconds: float  # wall time
+
+    def to_json(self) -> dict:
+        d = {f.name: getattr(self, f.name) for f in fields(self)}
+        if self.identify is not None:
+            d["identify"] = self.identify.to_json()
+        return d
 
 
 def table_rows(report: RealReport) -> tuple[list[str], list[list[str]]]:
@@ -68,7 +106,7 @@ def table_rows(report: RealReport) -> tuple[list[str], list[list[str]]]:
             f = forest["per_push"][-1][p]
             row.append(_fmt(f["mean"], p, f["std"]))
         if ident is not None:
-            i = ident["per_push"][-1][p]
+            i = ident.per_push[-1][p]
             row.append(_fmt(i["mean"], p, i["std"]))
         if report.prior_mean is not None:
             row.append(_fmt(report.prior_mean[p], p))
@@ -128,10 +166,10 @@ def markdown_table(report: RealReport, title: str | None = None) -> str:
     ]
     ident = report.identify
     if ident is not None:
-        last = ident["per_push"][-1]
-        noise = ident["noise_std"]
+        last = ident.per_push[-1]
+        noise = ident.noise_std
         push_lines.append(
-            f"- identify: {ident['model']}; replayed at {ident['rate_hz']:g} Hz (the recorded "
+            f"- identify: {ident.model}; replayed at {ident.rate_hz:g} Hz (the recorded "
             f"clock); noise from the misfit: force {noise['force_N']:.2f} N, position "
             f"{noise['position_m'] * 1e3:.1f} mm, angle {math.degrees(noise['angle_rad']):.1f}°; "
             f"not identified (prior width kept): {', '.join(last['unidentified']) or 'none'}; "

@@ -7,9 +7,13 @@ it comes from the results."""
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from pushtoknow.common.params import PARAM_NAMES
 from pushtoknow.reporting.tables import markdown_table
+
+if TYPE_CHECKING:
+    from pushtoknow.collection.efficiency import EfficiencyResults
 
 # The paper's Sim-Robotac NRMSE (Table III).
 PAPER_NRMSE = {
@@ -30,6 +34,11 @@ PAPER_NRMSE = {
     },
 }
 COLUMNS = [*PARAM_NAMES, "overall"]
+SET_TITLES = (
+    ("heldout", "Held-out catalogue objects"),
+    ("novel", "Novel objects"),
+    ("random", "Random-shape objects"),
+)
 HEADERS = ["m", "μ", "c_x", "c_y", "I_z", "overall"]
 
 
@@ -203,8 +212,12 @@ def render_report(results: dict, command: str, appendices: list[str] = ()) -> st
         f"Machine: {mach['processor']}, {mach['cpus']} CPUs, {mach['platform']}, "
         f"Python {mach['python']}, torch {mach['torch']}. Evaluation seed {cfg['seed']}, "
         f"{cfg['pushes']} pushes per object, {cfg['folds']} folds; training data: "
-        f"{results['data']['objects']} objects, {results['data']['pushes']} pushes "
-        f"(`{shown_path(results['data']['path'])}`).",
+        + (
+            "none given (no forest rows; the prior-mean row is the estimators' prior)."
+            if results.get("data") is None
+            else f"{results['data']['objects']} objects, {results['data']['pushes']} pushes "
+            f"(`{shown_path(results['data']['path'])}`)."
+        ),
         "",
         "Models:",
         "",
@@ -240,7 +253,7 @@ def render_report(results: dict, command: str, appendices: list[str] = ()) -> st
         "intervals).",
         "",
     ]
-    for set_name, title in (("heldout", "Held-out catalogue objects"), ("novel", "Novel objects")):
+    for set_name, title in SET_TITLES:
         if set_name not in results["sets"]:
             continue
         s = results["sets"][set_name]
@@ -260,8 +273,15 @@ def render_report(results: dict, command: str, appendices: list[str] = ()) -> st
                 "ranges.",
                 "",
             ]
+        if set_name == "random":
+            out += [
+                f"Random = random-shape objects (`random:{cfg.get('random_seed')}:I`, "
+                "`testbed.random_shapes`), continuous parameters.",
+                "",
+            ]
+        out += [f"*{row}*: {note}.\n" for row, note in s.get("notes", {}).items()]
     out += ["## 90% coverage after the first push and after the last", ""]
-    for set_name, title in (("heldout", "Held-out catalogue objects"), ("novel", "Novel objects")):
+    for set_name, title in SET_TITLES:
         if set_name in results["sets"]:
             out += [
                 f"**{title}**",
@@ -336,9 +356,11 @@ def identification_markdown(reports: list[dict], commands: list[str]) -> str:
     return "\n".join(rows)
 
 
-def efficiency_markdown(results: dict, command: str, figure: str = "efficiency.png") -> str:
-    """The learning-efficiency section from `ablate-efficiency`'s
-    efficiency.json: validation NLL and RMSE (mean ± std over seeds) per collection policy
+def efficiency_markdown(
+    results: EfficiencyResults, command: str, figure: str = "efficiency.png"
+) -> str:
+    """The learning-efficiency section from `ablate-efficiency`'s results
+    (`run_efficiency`): validation NLL and RMSE (mean ± std over seeds) per collection policy
     versus the number of training pushes."""
     lines = [
         "## Learning efficiency of the collection policies (Fig. 4b)",
@@ -346,18 +368,18 @@ def efficiency_markdown(results: dict, command: str, figure: str = "efficiency.p
         "Validation loss = NLL of the true parameters after one push from the prior, on fixed "
         "held-out catalogue objects, of a model retrained on all pushes collected so far "
         "(round 0: random affordance pushes shared by every policy). Mean ± std over seeds "
-        f"{next(iter(results.values()))[0]['seeds']}. Command:",
+        f"{next(iter(results.policies.values()))[0].seeds}. Command:",
         "",
         f"    {command}",
         "",
         "| policy | training pushes | val NLL | val RMSE (normalised) |",
         "|---|---|---|---|",
     ]
-    for policy, rows in results.items():
-        for r in rows:
+    for policy, rounds in results.policies.items():
+        for r in rounds:
             lines.append(
-                f"| {policy} | {r['pushes']} | {r['mean']:.1f} ± {r['std']:.1f} | "
-                f"{r['rmse_mean']:.3f} ± {r['rmse_std']:.3f} |"
+                f"| {policy} | {r.pushes} | {r.mean:.1f} ± {r.std:.1f} | "
+                f"{r.rmse_mean:.3f} ± {r.rmse_std:.3f} |"
             )
     lines += ["", f"![learning efficiency](figures/{figure})"]
     return "\n".join(lines)

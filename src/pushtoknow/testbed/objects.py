@@ -62,6 +62,7 @@ MAX_HEIGHT = 0.15  # m: a pushed object this tall would tip in reality (the test
 MIN_GYRATION_RADIUS = 0.003  # m: I_z ≥ m·(3 mm)². Measured: at 0.45 mm (rect1, 0.5 kg) the
 # simulation breaks down (0.36 N of force against μ·m·g = 2.45 N) and at 0.18 mm (30 kg) the
 # object slides away at 26 N of 589 N; from 1.4 mm up the force is right
+FRICTION_LIMIT = 2.0  # the largest plausible Coulomb coefficient the testbed simulates
 MAX_MASS = 30.0  # kg: heavier objects are not simulated faithfully. Measured on rect1 at μ = 0.5
 # and 20 mm/s: the pad sinks 0.16 mm into 30 kg (below the 0.5 mm pose noise), 0.5 mm into
 # 100 kg and 4.9 mm into 1000 kg, and it passes through 10⁶ kg
@@ -230,8 +231,10 @@ def validate_params(p: ObjectParams, footprint: Footprint, height: float = DEFAU
             f"above the {MAX_MASS:g} kg the testbed simulates faithfully (heavier objects let "
             "the pad sink into them)",
         )
-    if p.friction > 2.0:
-        raise ObjectSpecError("friction", p.friction, "implausible Coulomb coefficient (> 2)")
+    if p.friction > FRICTION_LIMIT:
+        raise ObjectSpecError(
+            "friction", p.friction, f"implausible Coulomb coefficient (> {FRICTION_LIMIT:g})"
+        )
     if height < MIN_HEIGHT:
         raise ObjectSpecError(
             "height", height, f"below {MIN_HEIGHT:.4f} m the pad passes over the object"

@@ -3,6 +3,8 @@ and the overhead camera."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 from shapely.geometry import MultiPoint, Point, Polygon, box
 
@@ -99,6 +101,51 @@ def marker_pieces(footprint: Footprint) -> list[np.ndarray]:
     return pieces
 
 
+@dataclass(frozen=True)
+class MassLayout:
+    """How an object's mass is split between its body and its supports (see `build_mjcf`).
+
+    points (N, 2): support positions (m, object frame), those carrying load; loads (N,): their
+    shares of the weight; support_masses (N,) kg; stiffness (N,) N/m of their load springs;
+    body_mass (kg), body_inertia (kg·m², about the vertical through the CoM) and body_ixx (the
+    thin-plate off-axis moment) of the object body itself."""
+
+    points: np.ndarray
+    loads: np.ndarray
+    support_masses: np.ndarray
+    stiffness: np.ndarray
+    body_mass: float
+    body_inertia: float
+    body_ixx: float
+
+
+def mass_layout(spec: ObjectSpec, config: SimConfig) -> MassLayout:
+    """The supports and mass split of `spec` under `config` (`build_mjcf`'s, which the
+    simulator can also write into a compiled scene of the same outline)."""
+    # Supports: each point is a small body on a vertical slide joint under the planar object,
+    # pressed on the table by a constant load w_i·m·g (its own weight plus a joint spring with
+    # a rest length 1 km below, constant to 1e-6). The loads are fixed shares centred on the
+    # CoM, so the friction of each point is exactly μ·w_i·m·g while it slides and the object
+    # neither tilts nor bounces: the planar motion depends on the pressure distribution alone.
+    p, sup = spec.params, config.support
+    supports = support_points(spec.footprint, sup.spacing, sup.edge_margin, (p.com_x, p.com_y))
+    loads = support_loads(supports, (p.com_x, p.com_y))
+    keep = loads > 1e-9
+    supports, loads = supports[keep], loads[keep]
+    com = np.array([p.com_x, p.com_y])
+    spread = float(loads @ np.sum((supports - com) ** 2, axis=1))  # m², Σ w_i ‖p_i − c‖²
+    share = min(SUPPORT_MASS_SHARE, 0.5 * p.inertia / max(p.mass * spread, 1e-12))
+    masses = share * loads * p.mass
+    stiffness = (loads * p.mass * GRAVITY - masses * GRAVITY) / -LOAD_SPRING_REST
+    # The object body carries the rest of the mass, placed so that the whole assembly has the
+    # object's mass, CoM and I_z (the supports' mass is centred on the CoM by construction).
+    body_mass = (1.0 - share) * p.mass
+    body_inertia = p.inertia - share * p.mass * spread
+    # Off-axis moments of inertia do not affect planar motion (no tilt); thin-plate values.
+    ixx = body_inertia / 2 + body_mass * spec.height * spec.height / 12
+    return MassLayout(supports, loads, masses, stiffness, body_mass, body_inertia, ixx)
+
+
 def build_mjcf(spec: ObjectSpec, config: SimConfig) -> str:
     """MJCF XML string for one object on the table."""
     ph, pad, sup, cam = config.physics, config.pad, config.support, config.camera
@@ -122,37 +169,21 @@ def build_mjcf(spec: ObjectSpec, config: SimConfig) -> str:
                 f'<geom name="obj_marker{i}" type="mesh" mesh="marker{i}" contype="0" '
                 f'conaffinity="0" rgba="{MARKER_RGBA}" mass="0" group="1"/>'
             )
-    # Supports: each point is a small body on a vertical slide joint under the planar object,
-    # pressed on the table by a constant load w_i·m·g (its own weight plus a joint spring with
-    # a rest length 1 km below, constant to 1e-6). The loads are fixed shares centred on the
-    # CoM, so the friction of each point is exactly μ·w_i·m·g while it slides and the object
-    # neither tilts nor bounces: the planar motion depends on the pressure distribution alone.
-    supports = support_points(spec.footprint, sup.spacing, sup.edge_margin, (p.com_x, p.com_y))
-    loads = support_loads(supports, (p.com_x, p.com_y))
-    keep = loads > 1e-9
-    supports, loads = supports[keep], loads[keep]
-    com = np.array([p.com_x, p.com_y])
-    spread = float(loads @ np.sum((supports - com) ** 2, axis=1))  # m², Σ w_i ‖p_i − c‖²
-    share = min(SUPPORT_MASS_SHARE, 0.5 * p.inertia / max(p.mass * spread, 1e-12))
+    layout = mass_layout(spec, config)
     support_bodies = []
-    for i, ((x, y), w) in enumerate(zip(supports, loads)):
-        m_i = share * w * p.mass
-        stiffness = (w * p.mass * GRAVITY - m_i * GRAVITY) / -LOAD_SPRING_REST
+    for i, ((x, y), m_i, k_i) in enumerate(
+        zip(layout.points, layout.support_masses, layout.stiffness)
+    ):
         support_bodies.append(
             f'<body name="support{i}" pos="{x:.6f} {y:.6f} 0">'
-            f'<joint name="support{i}_z" type="slide" axis="0 0 1" stiffness="{stiffness:.9g}" '
+            f'<joint name="support{i}_z" type="slide" axis="0 0 1" stiffness="{k_i:.9g}" '
             f'springref="{LOAD_SPRING_REST}"/>'
             f'<inertial pos="0 0 {sup.radius}" mass="{m_i:.9g}" diaginertia="1e-9 1e-9 1e-9"/>'
             f'<geom name="support{i}" type="sphere" size="{sup.radius}" pos="0 0 {sup.radius}" '
             f'contype="{TABLE_BITS}" conaffinity="{TABLE_BITS}" condim="3" '
             f'friction="{p.friction} 0 0" mass="0" rgba="0 0 0 0" group="3"/></body>'
         )
-    # The object body carries the rest of the mass, placed so that the whole assembly has the
-    # object's mass, CoM and I_z (the supports' mass is centred on the CoM by construction).
-    body_mass = (1.0 - share) * p.mass
-    body_inertia = p.inertia - share * p.mass * spread
-    # Off-axis moments of inertia do not affect planar motion (no tilt); thin-plate values.
-    ixx = body_inertia / 2 + body_mass * h * h / 12
+    body_mass, body_inertia, ixx = layout.body_mass, layout.body_inertia, layout.body_ixx
     pad_condim = 1 if pad.friction == 0 else 3
     fov = cam.fovy_deg
     size = max(cam.width, cam.height) * cam.outline_scale

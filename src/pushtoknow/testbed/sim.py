@@ -8,16 +8,16 @@ force exerted *by the pad on the object* in world axes, averaged over each sampl
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from pushtoknow.common.params import GRAVITY
+from pushtoknow.common.params import GRAVITY, ObjectParams
 from pushtoknow.testbed import render as _render  # sets MUJOCO_GL before mujoco is imported
 from pushtoknow.testbed.config import SimConfig, check_testbed_version
 from pushtoknow.testbed.objects import ObjectSpec
 from pushtoknow.testbed.push import PAD_CLEARANCE, Push, speed_profile
-from pushtoknow.testbed.scene import build_mjcf
+from pushtoknow.testbed.scene import MassLayout, build_mjcf, mass_layout
 
 mujoco = _render.mujoco
 
@@ -86,11 +86,47 @@ class PushSimulator:
         self._support_geom_set = {
             g for g in range(m.ngeom) if m.body_parentid[m.geom_bodyid[g]] == obj_body
         }
+        self._object_body = obj_body
+        self._support_bodies = np.array(
+            [b for b in range(m.nbody) if m.body_parentid[b] == obj_body], dtype=np.int64
+        )
+        self._support_geoms = np.array(
+            [g for g in range(m.ngeom) if m.body_parentid[m.geom_bodyid[g]] == obj_body],
+            dtype=np.int64,
+        )
+        self._support_joints = m.body_jntadr[self._support_bodies]
         jx = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, "pusher_x")
         self._pad_qpos = m.jnt_qposadr[jx]
         self._pad_qvel = m.jnt_dofadr[jx]
         self._renderer: _render.OverheadRenderer | None = None
         self.camera = self.config.camera.model()
+
+    def set_params(self, params: ObjectParams, layout: MassLayout | None = None) -> bool:
+        """Give the compiled scene another object of the same outline and height: write the
+        mass split `scene.mass_layout` gives for `params` (masses, inertia, CoM, load springs,
+        friction) into the model, exactly as `build_mjcf` would compile it, without rebuilding.
+        Returns False, changing nothing, where the new CoM needs another set of supports (a
+        CoM near the edge lifts some off, or needs the outline's corners): build anew then.
+        The data is not reset (call `reset`). `layout`: `mass_layout` of the new object when
+        already computed."""
+        spec = replace(self.spec, params=params)
+        layout = layout or mass_layout(spec, self.config)
+        m = self.model
+        b = self._support_bodies
+        placed = np.round(layout.points, 6)  # as written in the MJCF (`.6f`)
+        if len(placed) != len(b) or not np.array_equal(placed, m.body_pos[b, :2]):
+            return False
+        nine = np.vectorize(lambda v: float(f"{v:.9g}"))  # as written in the MJCF (`.9g`)
+        m.body_mass[b] = nine(layout.support_masses)
+        m.jnt_stiffness[self._support_joints] = nine(layout.stiffness)
+        m.geom_friction[self._support_geoms, 0] = params.friction
+        o = self._object_body
+        m.body_mass[o] = layout.body_mass
+        m.body_ipos[o] = (params.com_x, params.com_y, spec.height / 2)
+        m.body_inertia[o] = (layout.body_ixx, layout.body_ixx, layout.body_inertia)
+        mujoco.mj_setConst(m, self.data)
+        self.spec = spec
+        return True
 
     # ----------------------------------------------------------------- state
     @property

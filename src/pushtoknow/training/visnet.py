@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 
 import torch
 from pydantic import Field
@@ -116,7 +116,7 @@ def train_visnet(
             "epoch": epoch + 1,
             "train_loss": total / max(len(tr), 1),
             "seconds": time.perf_counter() - t0,
-            **{f"val_{k}": v for k, v in err.items()},
+            **{f"val_{k}": v for k, v in ({} if err is None else err.to_json()).items()},
         }
         history.append(row)
         if log:
@@ -125,12 +125,31 @@ def train_visnet(
     return VisNetResult(net, history, history[-1] if history else {})
 
 
+@dataclass(frozen=True)
+class VisNetPoseError:
+    """VisNet's pose error against the truth (`evaluate_visnet`): RMS position error (mm) and
+    median |θ error| (deg) of its measurements (`xy_rmse_mm`, `theta_med_deg`) and of the
+    reference poses it was given (`ref_xy_rmse_mm`, `ref_theta_med_deg`: what VisNet must
+    beat). Training stores them per epoch with a `val_` prefix."""
+
+    xy_rmse_mm: float
+    theta_med_deg: float
+    ref_xy_rmse_mm: float
+    ref_theta_med_deg: float
+
+    def to_json(self) -> dict:
+        return asdict(self)
+
+
 @torch.no_grad()
-def evaluate_visnet(net, rgbd, mask0, pose, pose0, ref, camera, batch=512) -> dict:
-    """RMS position error (mm) and median |θ error| (deg) of measurements vs truth, and the
-    same for the reference itself (what VisNet must beat)."""
+def evaluate_visnet(
+    net, rgbd, mask0, pose, pose0, ref, camera, batch=512
+) -> VisNetPoseError | None:
+    """VisNet's measurements of the frames (rgbd (F,4,H,W), mask0 (F,1,H,W), pose0 (F,3),
+    references ref (F,3)) against the true poses `pose` (F,3), in batches of `batch` frames
+    (see `VisNetPoseError`); None without frames."""
     if len(pose) == 0:
-        return {}
+        return None
     net.eval()
     meas = torch.cat(
         [
@@ -154,9 +173,6 @@ def evaluate_visnet(net, rgbd, mask0, pose, pose0, ref, camera, batch=512) -> di
     m_xy, m_th = errs(meas)
     r_xy, r_th = errs(ref)
     net.train()
-    return {
-        "xy_rmse_mm": m_xy,
-        "theta_med_deg": m_th,
-        "ref_xy_rmse_mm": r_xy,
-        "ref_theta_med_deg": r_th,
-    }
+    return VisNetPoseError(
+        xy_rmse_mm=m_xy, theta_med_deg=m_th, ref_xy_rmse_mm=r_xy, ref_theta_med_deg=r_th
+    )
