@@ -2,6 +2,8 @@
 
 import platform
 import resource
+import statistics
+from collections.abc import Sequence
 
 
 def machine_description() -> str:
@@ -21,3 +23,8 @@ def machine_description() -> str:
 
 def peak_rss_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
+def median_or_nan(values: Sequence[float]) -> float:
+    """The median of `values`, NaN when there are none."""
+    return float(statistics.median(values)) if values else float("nan")

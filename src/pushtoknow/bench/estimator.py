@@ -14,7 +14,6 @@ two-sided 90% quantile, 1.645) and the count of means outside their own interval
 from __future__ import annotations
 
 import os
-import statistics
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass
@@ -23,7 +22,7 @@ import numpy as np
 import torch
 from scipy.stats import norm
 
-from pushtoknow.bench import machine_description
+from pushtoknow.bench import machine_description, median_or_nan
 from pushtoknow.common.params import PARAM_NAMES
 from pushtoknow.evaluation.metrics import coverage, param_ranges
 
@@ -98,10 +97,6 @@ class EstimatorBench:
         return d
 
 
-def _median(values: Sequence[float]) -> float:
-    return float(statistics.median(values)) if values else float("nan")
-
-
 def summarise(rows: Sequence[ObjectRow]) -> EstimatorSummary:
     """Pool per-object rows into the summary (see `EstimatorSummary`); NaN where there is
     nothing to pool."""
@@ -119,9 +114,9 @@ def summarise(rows: Sequence[ObjectRow]) -> EstimatorSummary:
     return EstimatorSummary(
         objects=len(rows),
         updates=len(updates),
-        update_s_median=_median(updates),
+        update_s_median=median_or_nan(updates),
         update_s_max=float(max(updates)) if updates else float("nan"),
-        object_s_median=_median([r.object_s for r in rows]),
+        object_s_median=median_or_nan([r.object_s for r in rows]),
         error_norm_mean=error_mean,
         error_norm_overall=float(np.mean(list(error_mean.values()))),
         coverage90=covered,

@@ -19,7 +19,6 @@ them like `bench estimator`'s (`evaluation.metrics.coverage` at 90%).
 from __future__ import annotations
 
 import os
-import statistics
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass
@@ -27,7 +26,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 import torch
 
-from pushtoknow.bench import machine_description
+from pushtoknow.bench import machine_description, median_or_nan
 from pushtoknow.common.params import PARAM_NAMES
 from pushtoknow.evaluation.metrics import coverage, param_ranges
 
@@ -107,10 +106,6 @@ class SysidBench:
         return d
 
 
-def _median(values: Sequence[float]) -> float:
-    return float(statistics.median(values)) if values else float("nan")
-
-
 def summarise(rows: Sequence[SysidObjectRow]) -> SysidSummary:
     """Pool rows into the summary (see `SysidSummary`); NaN where there is nothing to pool."""
     error_mean = {
@@ -124,9 +119,9 @@ def summarise(rows: Sequence[SysidObjectRow]) -> SysidSummary:
         covered = dict.fromkeys(PARAM_NAMES, float("nan"))
     return SysidSummary(
         objects=len(rows),
-        fit_s_median=_median([r.fit_s for r in rows]),
-        object_s_median=_median([r.object_s for r in rows]),
-        evaluations_median=_median([r.evaluations for r in rows]),
+        fit_s_median=median_or_nan([r.fit_s for r in rows]),
+        object_s_median=median_or_nan([r.object_s for r in rows]),
+        evaluations_median=median_or_nan([r.evaluations for r in rows]),
         error_norm_mean=error_mean,
         error_norm_overall=float(np.mean(list(error_mean.values()))),
         mu_m_rel_error_mean_abs=float(np.mean([abs(r.mu_m_rel_error) for r in rows]))
@@ -179,14 +174,7 @@ def bench_pushes(model, spec, pushes: int, profiles: tuple[str, ...], seed: int)
         """The physics estimator's start poses (VisNet), whose update only perceives."""
 
         def update(self, record, view, pose0):
-            if record.rgb is not None and view is not None:
-                poses = self.pose_track(record, view, pose0)
-            else:
-                poses = np.asarray(record.pose, dtype=np.float64)
-            if view is not None:
-                self._prev = (view.s0, pose0)
-            self._last_pose = poses[-1]
-            return poses
+            return self.perceive(record, view, pose0)
 
     config = InferenceConfig(
         pushes=pushes, estimator="physics", profiles=tuple(profiles), policy="uniform"

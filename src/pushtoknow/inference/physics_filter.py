@@ -216,13 +216,22 @@ class PhysicsFilterEstimator(Estimator):
             track.append(z[0])
         return np.stack(track)
 
-    def update(self, record: PushRecord, view: View | None, pose0: np.ndarray) -> np.ndarray:
-        """The belief after the executed push (module doc); returns VisNet's pose track."""
-        scene = self._scene(view, pose0)
+    def perceive(self, record: PushRecord, view: View | None, pose0: np.ndarray) -> np.ndarray:
+        """The executed push's pose track (T, 3) as perceived (VisNet's, or a recording's
+        tracked poses without images), remembered for the next push's start pose."""
         if record.rgb is not None and view is not None:
             poses = self.pose_track(record, view, pose0)
         else:  # a recording with tracked poses and no images
             poses = np.asarray(record.pose, dtype=np.float64)
+        if view is not None:
+            self._prev = (view.s0, pose0)
+        self._last_pose = poses[-1]
+        return poses
+
+    def update(self, record: PushRecord, view: View | None, pose0: np.ndarray) -> np.ndarray:
+        """The belief after the executed push (module doc); returns VisNet's pose track."""
+        scene = self._scene(view, pose0)
+        poses = self.perceive(record, view, pose0)
         seen = dataclasses.replace(record, pose=poses)
         (track,) = tracks_from_records([seen], self.sim_config)
         extra = self._closed_form_start(seen) if not self.updates else []
@@ -251,9 +260,6 @@ class PhysicsFilterEstimator(Estimator):
             up.iterations,
             ", poor fit" if up.poor_fit else "",
         )
-        if view is not None:
-            self._prev = (view.s0, pose0)
-        self._last_pose = poses[-1]
         return poses
 
     def _closed_form_start(self, record: PushRecord) -> list[np.ndarray]:
