@@ -23,3 +23,36 @@ def rasterise_footprint(
 
 def iou(a: np.ndarray, b: np.ndarray) -> float:
     return float((a & b).sum() / max((a | b).sum(), 1))
+
+
+def assert_recorded_run(estimator: str, recording: str, rtol: float, atol: float) -> list:
+    """Run the shipped model's `estimator` on held-out catalogue:117 (2 pushes, constant and
+    release, 4 candidates, seed 0) under each policy of tests/inference/data/`recording`;
+    assert its pushes equal the recorded ones and its normalised beliefs equal them within
+    (rtol, atol). Returns each policy's `(InferenceConfig, InferenceResult)`."""
+    import json
+    from pathlib import Path
+
+    from pushtoknow.inference import InferenceConfig, infer_simulated
+    from pushtoknow.models.checkpoint import load_checkpoint
+    from pushtoknow.pretrained import resolve_model_path
+    from pushtoknow.testbed.object_refs import load_object_spec
+
+    data = Path(__file__).parent / "inference" / "data" / recording
+    model = load_checkpoint(resolve_model_path("pretrained"))
+    runs = []
+    for policy, want in json.loads(data.read_text()).items():
+        cfg = InferenceConfig(
+            estimator=estimator,
+            pushes=2,
+            policy=policy,
+            candidates=4,
+            profiles=("constant", "release"),
+        )
+        res = infer_simulated(model, load_object_spec("catalogue:117"), cfg, seed=0)
+        assert [e.push.as_array().tolist() for e in res.estimates] == want["pushes"]
+        for name in ("mean_norm", "cov_norm"):
+            got = np.array([getattr(e, name) for e in res.estimates])
+            np.testing.assert_allclose(got, want[name], rtol=rtol, atol=atol, err_msg=name)
+        runs.append((cfg, res))
+    return runs

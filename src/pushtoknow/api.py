@@ -23,7 +23,7 @@ from typing import cast
 import numpy as np
 
 from pushtoknow.common.estimators import ESTIMATOR_NAMES
-from pushtoknow.common.policies import POLICY_NAMES
+from pushtoknow.common.policy_names import POLICY_NAMES
 from pushtoknow.common.random import stream_seed
 from pushtoknow.identification.fit import Identification
 from pushtoknow.identification.prior import CATALOGUE_PRIOR, EVERYDAY_PRIOR, PriorRanges

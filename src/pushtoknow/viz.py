@@ -51,7 +51,8 @@ def save_push_strip(rec, camera, path: Path, title: str = "", fmt: str | None = 
     ax = fig.add_subplot(gs[1, : STRIP_FRAMES // 2])
     ax.plot(rec.time, rec.tactile[:, 0], label="F_x (noisy)", lw=0.8)
     ax.plot(rec.time, rec.tactile[:, 1], label="F_y (noisy)", lw=0.8)
-    ax.plot(rec.time, np.linalg.norm(rec.force_clean, axis=1), "k", label="‖F‖ clean", lw=1.2)
+    if rec.force_clean is not None:  # a simulated push's noiseless force
+        ax.plot(rec.time, np.linalg.norm(rec.force_clean, axis=1), "k", label="‖F‖ clean", lw=1.2)
     ax.set_xlabel("time (s)")
     ax.set_ylabel("force on object (N)")
     ax.legend(fontsize=7)

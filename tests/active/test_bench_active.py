@@ -20,11 +20,11 @@ def test_run_active_bench_reports_both_scores():
     out = run_active_bench(
         seed=0, num_candidates=2, num_sigma_points=20, repeats=1, horizon_fraction=0.04
     )
-    assert set(out["decision_s_median"]) == {"kl", "entropy"}
-    assert all(v > 0 for v in out["decision_s_median"].values())
-    assert out["n_steps"] == 2 and out["num_candidates"] == 2 and out["num_sigma_points"] == 20
-    assert isinstance(out["machine"], str) and out["machine"]
-    for r in out["per_score"].values():
+    assert set(out.decision_s_median) == {"kl", "entropy"}
+    assert all(v > 0 for v in out.decision_s_median.values())
+    assert out.n_steps == 2 and out.num_candidates == 2 and out.num_sigma_points == 20
+    assert isinstance(out.machine, str) and out.machine
+    for r in out.per_score.values():
         assert 0 <= r["chosen"][0] < 2
         assert r["breakdown_s"]["process_net"] > 0
 

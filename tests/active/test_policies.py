@@ -5,7 +5,7 @@ import torch
 from active_toys import F64, CouplingContext, linear_filter, linear_prior
 from pydantic import ValidationError
 
-from pushtoknow.active.policies import (
+from pushtoknow.active.information_policy import (
     ActiveConfig,
     ActivePolicy,
     CandidateSelector,

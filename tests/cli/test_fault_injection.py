@@ -297,7 +297,7 @@ def no_work(monkeypatch):
     """The work of `infer`, `simulate` and `estimate-real` fails loudly: a check must come
     before it."""
     import pushtoknow.datasets.generate as generate
-    import pushtoknow.evaluation.real as real
+    import pushtoknow.evaluation.real_object as real
     import pushtoknow.inference as inference
 
     def work(*args, **kwargs):

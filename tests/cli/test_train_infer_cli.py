@@ -12,8 +12,8 @@ from pushtoknow.cli.main import app, main
 from pushtoknow.common.errors import CheckpointError
 from pushtoknow.common.params import PARAM_NAMES
 from pushtoknow.testbed.object_refs import load_object_spec
-from pushtoknow.training.data import dataset_camera
 from pushtoknow.training.pipeline import TrainConfig, visnet_config_for
+from pushtoknow.training.push_tensors import dataset_camera
 from tiny_training import DATA_OBJECTS, tiny_dataset, tiny_train_config
 
 STAGES = ("visnet", "supervised", "end_to_end", "calibration")

@@ -73,7 +73,8 @@ def test_resume_skips_finished_shards(tmp_path):
     shard_path(tmp_path, 1).unlink()  # as if interrupted before the second shard landed
     (tmp_path / "shard-00001.h5.tmp").write_bytes(b"partial")
     res = generate_dataset(tmp_path, cfg(), progress=False)
-    assert res == {"shards_written": 1, "shards_skipped": 1, "objects": 3}
+    assert (res.shards_written, res.shards_skipped, res.objects) == (1, 1, 3)
+    assert res.to_json() == {"shards_written": 1, "shards_skipped": 1, "objects": 3}
     assert first.stat().st_mtime_ns == mtime
     assert not list(tmp_path.glob("*.tmp"))
     assert dataset_info(tmp_path).pushes == 6
@@ -204,7 +205,7 @@ def test_a_refused_resume_writes_no_provenance_record(tmp_path, dataset):
     with pytest.raises(DatasetError, match="other settings"):
         generate_dataset(copy, cfg(seed=2), progress=False)
     assert not (copy / "generation.json").exists()
-    assert generate_dataset(copy, cfg(), progress=False)["shards_skipped"] == 2
+    assert generate_dataset(copy, cfg(), progress=False).shards_skipped == 2
     info = dataset_info(copy, verify=True)
     assert info.verified_shards == 2
 

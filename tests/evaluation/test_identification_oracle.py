@@ -3,12 +3,13 @@
 import numpy as np
 
 from pushtoknow.common.params import ObjectParams
-from pushtoknow.evaluation.heldout import HeldoutRun, records_from_tracks, track_array
+from pushtoknow.evaluation.heldout import HeldoutRun
 from pushtoknow.evaluation.identification import oracle_run, push_profiles
 from pushtoknow.evaluation.suite import summarise_method
 from pushtoknow.identification.synthetic import simulate_pushes
 from pushtoknow.testbed.config import SimConfig
 from pushtoknow.testbed.objects import ObjectSpec
+from pushtoknow.testbed.sim import stack_records, unstack_records
 
 SHORT = SimConfig(render=False).model_copy(
     update={"push": SimConfig().push.model_copy(update={"horizon": 2.0})}
@@ -28,12 +29,9 @@ def test_push_profiles_alternate():
 def test_oracle_row_from_the_pushes_a_model_made():
     spec = ObjectSpec("rect1", ObjectParams(0.4, 0.6, 0.0, 0.01, 1.0e-3), name="o")
     records = simulate_pushes(spec, ["constant"], seed=1, config=SHORT)
-    back = records_from_tracks(
-        np.stack([r.push.as_array() for r in records]), np.stack([track_array(r) for r in records])
-    )
-    assert back[0].push == records[0].push
-    np.testing.assert_array_equal(back[0].pose, records[0].pose)
-    np.testing.assert_array_equal(back[0].pusher, records[0].pusher)
+    (back,) = unstack_records(stack_records([records]))  # the cache's packing, by field name
+    assert back == [r.tracks_only() for r in records]
+    assert back[0].rgb is None and back[0].force_clean is not None
     truth = spec.params.as_array()
     base = HeldoutRun(
         mean=np.zeros((1, 2, 5)),
@@ -43,12 +41,10 @@ def test_oracle_row_from_the_pushes_a_model_made():
         truth=truth[None],
         ids=["o"],
         seconds=[0.0],
-        push_actions=np.stack([r.push.as_array() for r in records])[None],
-        push_tracks=np.stack([track_array(r) for r in records])[None],
+        pushes=[back],
     )
-    tracks = base.push_tracks.copy()
     run = oracle_run(base, [spec.to_json()], SHORT, seed=0, workers=1, progress=None)
-    np.testing.assert_array_equal(base.push_tracks, tracks)  # the tracking noise goes on a copy
+    assert base.pushes == [[r.tracks_only() for r in records]]  # the noise goes on a copy
     assert run.mean.shape == (1, 2, 5) and run.zscore.shape == (1, 2, 5)
     assert abs(run.product[0, 1] / (0.4 * 0.6) - 1) < 0.02  # μ·m from one constant push
     assert abs(run.product[0, 0] / (0.4 * 0.6) - 1) > 0.02  # the prior row does not know it
@@ -60,19 +56,24 @@ def test_oracle_row_from_the_pushes_a_model_made():
     assert summary["outside_interval"] == 0
 
 
-def test_the_oracle_reruns_a_cached_run_without_push_tracks(tmp_path, monkeypatch):
-    """A cached inference run is reused, unless the oracle needs the push tracks it lacks."""
+def test_the_oracle_reruns_a_cached_run_without_pushes(tmp_path, monkeypatch):
+    """A cached inference run is reused, unless the oracle needs the pushes it lacks."""
     import numpy as np
 
     from pushtoknow.evaluation import suite
     from pushtoknow.evaluation.heldout import HeldoutRun
+    from pushtoknow.testbed.push import Push
+    from pushtoknow.testbed.sim import PushRecord
 
-    def run(tracks: bool) -> HeldoutRun:
+    t = np.arange(4.0)
+    push = PushRecord(Push((0.0, -0.05), 1.5), t, np.zeros((4, 3)), np.zeros((4, 3)), None,
+                      np.zeros((4, 2)), None, None, None)  # fmt: skip
+
+    def run(pushes: bool) -> HeldoutRun:
         z = np.zeros((1, 2, 5))
         return HeldoutRun(z, z, z, np.zeros((1, 2)), np.zeros((1, 5)), ["o"], [1.0],
                           np.zeros((1, 1, 3)), np.zeros((1, 1, 3)), [["constant"]],
-                          np.zeros((1, 1, 5)) if tracks else None,
-                          np.zeros((1, 1, 4, 9)) if tracks else None)  # fmt: skip
+                          [[push]] if pushes else None)  # fmt: skip
 
     calls = []
     monkeypatch.setattr(suite, "evaluate_heldout", lambda *a, **k: calls.append(1) or run(True))
@@ -83,9 +84,9 @@ def test_the_oracle_reruns_a_cached_run_without_push_tracks(tmp_path, monkeypatc
     key = suite._cache_key(model, "uniform", ["o"], cfg, ("constant",))
     suite._save_run(cache, key, run(False))
     args = (model, "uniform", ["o"], cfg, ("constant",), cache, None)
-    assert suite._inference_run(*args).push_tracks is None and not calls  # from the cache
-    assert suite._inference_run(*args, need_tracks=True).push_tracks is not None and calls
-    assert suite._inference_run(*args, need_tracks=True).push_tracks is not None  # re-cached
+    assert suite._inference_run(*args).pushes is None and not calls  # from the cache
+    assert suite._inference_run(*args, need_pushes=True).pushes == [[push]] and calls
+    assert suite._inference_run(*args, need_pushes=True).pushes == [[push]]  # re-cached
     assert len(calls) == 1
 
 
@@ -94,12 +95,17 @@ def test_the_oracle_row_is_cached_by_the_pushes_it_replays(tmp_path, monkeypatch
     from pushtoknow.evaluation import identification, suite
     from pushtoknow.evaluation.heldout import HeldoutRun
     from pushtoknow.evaluation.metrics import MethodRun
+    from pushtoknow.testbed.push import Push
+    from pushtoknow.testbed.sim import PushRecord
 
     def base(track_value: float) -> HeldoutRun:
         z = np.zeros((1, 2, 5))
+        a = np.full((4, 3), track_value)
+        push = PushRecord(Push((0.0, -0.05), 1.5), np.arange(4.0), a, a, None, a[:, :2],
+                          None, None, None)  # fmt: skip
         return HeldoutRun(z, z, z, np.zeros((1, 2)), np.zeros((1, 5)), ["o"], [1.0],
                           np.zeros((1, 1, 3)), np.zeros((1, 1, 3)), [["constant"]],
-                          np.zeros((1, 1, 5)), np.full((1, 1, 4, 9), track_value))  # fmt: skip
+                          [[push]])  # fmt: skip
 
     calls = []
 

@@ -10,7 +10,7 @@ from pushtoknow.cli.main import app
 from pushtoknow.evaluation.ridge import RIDGE_PARTS, ridge_misfit
 from pushtoknow.models.checkpoint import load_checkpoint
 from pushtoknow.pretrained import pretrained_dir
-from pushtoknow.training.data import load_push_tensors
+from pushtoknow.training.push_tensors import load_push_tensors
 from tiny_training import tiny_dataset, tiny_run
 
 DELTAS = np.array([-0.3, 0.0, 0.3])

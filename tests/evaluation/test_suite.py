@@ -96,13 +96,12 @@ def test_evaluate_cli_reduced_config(tmp_path_factory, tmp_path):
     data, run = tiny_dataset(tmp_path_factory), tiny_run(tmp_path_factory)
     out = tmp_path / "report"
     args = ["evaluate", "--data", str(data), "--models", str(run), "--out", str(out)]
-    args += ["--config", str(CI_CONFIG), "--json"]
+    args += ["--config", str(CI_CONFIG), "--json", "--physics-sets", "novel"]
     result = runner.invoke(app, args)
     assert result.exit_code == 0, result.output
     printed = json.loads(result.stdout.strip().splitlines()[-1])
-    methods = printed["methods"]
+    methods = printed["methods"]  # the held-out set's: no physics rows (--physics-sets)
     expected = {"vt-addf:uniform", "vt-addf:active-kl", "prior-mean", "forest", "forest-visnet"}
-    expected.add("physics:uniform")  # the physics estimator on the same pushes
     assert set(methods) == expected
     for name, m in methods.items():
         assert set(m["nrmse"]) == {"mass", "friction", "com_x", "com_y", "inertia", "overall"}
@@ -116,6 +115,9 @@ def test_evaluate_cli_reduced_config(tmp_path_factory, tmp_path):
     full = json.loads((out / "results.json").read_text())
     assert set(full["sets"]) == {"heldout", "novel"}
     assert len(full["sets"]["novel"]["objects"]) == 2
+    novel = full["sets"]["novel"]["methods"]  # the physics estimator on the same pushes
+    assert set(novel) == expected | {"physics:uniform"}
+    assert novel["physics:uniform"]["outside_interval"] == 0
     assert all((Path(p).stat().st_size > 1000) for p in full["figures"].values())
     report = (out / "RESULTS.md").read_text()
     assert "| forest-visnet |" in report and "Novel objects (2 objects)" in report
@@ -250,8 +252,8 @@ def test_physics_rows_beside_the_learned_ones(physics_eval):
         cached = ("vt-addf_uniform", "physics_uniform")
         runs = {m: np.load(out / "cache" / set_name / f"{m}.npz") for m in cached}
         np.testing.assert_array_equal(
-            runs["physics_uniform"]["push_actions"], runs["vt-addf_uniform"]["push_actions"]
-        )
+            runs["physics_uniform"]["push_action"], runs["vt-addf_uniform"]["push_action"]
+        )  # the pushes' fields by name (`testbed.sim.stack_records`, `suite.PUSH_PREFIX`)
         assert "replayed" in results["sets"][set_name]["notes"]["physics:uniform"]
 
 
@@ -335,6 +337,16 @@ def test_merge_keeps_rows_and_computes_only_missing_ones(physics_eval, tmp_path,
     assert rnd["methods"]["prior-mean"]["nrmse_all"] == nrmse(mean[None], truth)
     assert merged["kept"]["rows"] == {"heldout": list(old_held)}
     assert merged["data"] == kept["data"] and merged["primary"] == "vt-addf:uniform"
+    # physics rows on the random set only: the held-out set gains none and runs nothing
+    calls.clear()
+    only_random = cfg.model_copy(update={"physics_sets": ("random",)})
+    part = suite.run_evaluation(None, [run], only_random, tmp_path / "part", keep=keep)
+    assert "physics:uniform" not in part["sets"]["heldout"]["methods"]
+    assert "physics:uniform" in part["sets"]["random"]["methods"]
+    assert calls == [
+        ("vt-addf", ("random:9001:0",), False),
+        ("physics", ("random:9001:0",), True),
+    ]
 
 
 def test_merge_refuses_rows_of_another_config(physics_eval, tmp_path):

@@ -230,8 +230,8 @@ def test_novel_objects_with_mixed_pushes_end_to_end():
     from pushtoknow.evaluation.identification import run_identification_benchmark
 
     res = run_identification_benchmark(2, 5, ["constant", "release"], seed=1, config=CFG)
-    assert res["mu_m_relative_error"]["max"] < 0.02
-    for row in res["per_object"]:
+    assert res.mu_m_relative_error["max"] < 0.02
+    for row in res.per_object:
         truth = np.array(row["truth"])
         mean = np.array([row["parameters"][k]["mean"] for k in row["parameters"]])
         assert np.hypot(*(mean[2:4] - truth[2:4])) < 2e-3

@@ -249,7 +249,7 @@ def test_policies_choose_among_candidates_of_both_profiles():
 def test_policies_are_made_by_name():
     from typing import get_args
 
-    from pushtoknow.common.policies import POLICY_NAMES
+    from pushtoknow.common.policy_names import POLICY_NAMES
     from pushtoknow.inference.policies import InformationPolicy, make_policy
 
     assert POLICY_NAMES == get_args(InferenceConfig.model_fields["policy"].annotation)

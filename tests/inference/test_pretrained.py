@@ -88,23 +88,18 @@ def test_shipped_model_estimates_one_push():
 
 
 @pytest.mark.slow
-def test_the_learned_filter_gives_the_recorded_beliefs_bit_for_bit():
-    """Same seed, same result: the shipped model's beliefs and chosen pushes on held-out rect2
-    (2 pushes, uniform and active-entropy) equal, bit for bit, those recorded in
-    tests/inference/data: a changed random draw, policy decision or filter step shows here."""
-    golden = json.loads(
-        (Path(__file__).parent / "data" / "learned_filter_catalogue117_seed0.json").read_text()
-    )
+def test_the_learned_filter_gives_the_recorded_beliefs():
+    """Same seed, same result: the shipped model's pushes on held-out rect2 (2 pushes, uniform
+    and active-entropy) equal those recorded in tests/inference/data and its normalised beliefs
+    equal them within 2e-3 (another CPU's float32 vector instructions round differently, and
+    60 filter steps add it up); on one machine a rerun is bit for bit. A changed random draw,
+    policy decision or filter step shows here."""
+    from helpers import assert_recorded_run
+
+    runs = assert_recorded_run("vt-addf", "learned_filter_catalogue117_seed0.json", 0.0, 2e-3)
     model = load_checkpoint(resolve_model_path("pretrained"))
-    for policy, want in golden.items():
-        cfg = InferenceConfig(
-            estimator="vt-addf",
-            pushes=2,
-            policy=policy,
-            candidates=4,
-            profiles=("constant", "release"),
-        )
-        res = infer_simulated(model, load_object_spec("catalogue:117"), cfg, seed=0)
-        assert [e.push.as_array().tolist() for e in res.estimates] == want["pushes"]
-        assert [e.mean_norm.tolist() for e in res.estimates] == want["mean_norm"]
-        assert [e.cov_norm.tolist() for e in res.estimates] == want["cov_norm"]
+    for cfg, res in runs:
+        again = infer_simulated(model, load_object_spec("catalogue:117"), cfg, seed=0)
+        for e, f in zip(res.estimates, again.estimates, strict=True):
+            assert np.array_equal(e.mean_norm, f.mean_norm)
+            assert np.array_equal(e.cov_norm, f.cov_norm)

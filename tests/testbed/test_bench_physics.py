@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from pushtoknow.bench.physics import render_markdown, summary_rows
+from pushtoknow.bench.physics_fidelity import render_markdown, summary_rows
 
 EXE = [sys.executable, "-m", "pushtoknow.cli"]
 V1 = Path(__file__).parents[2] / "docs" / "physics-v1.json"

@@ -19,8 +19,8 @@ from pushtoknow.common.errors import DatasetError
 from pushtoknow.datasets.generate import GENERATION_FILE, GenerationConfig, generate_dataset
 from pushtoknow.datasets.shards import dataset_info, list_shards, read_shard
 from pushtoknow.testbed.config import PushConfig, SimConfig
-from pushtoknow.training.data import load_push_tensors
 from pushtoknow.training.pipeline import train_model
+from pushtoknow.training.push_tensors import load_push_tensors
 from tiny_training import DATA_OBJECTS, DATA_PUSHES, DATA_SEED, SIGMA_POINTS, tiny_train_config
 
 FIRST = DATA_OBJECTS  # collected objects continue the tiny dataset's seeded order

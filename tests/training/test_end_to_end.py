@@ -11,9 +11,9 @@ import torch
 from pushtoknow.filters.base import FilterConfig
 from pushtoknow.models.checkpoint import ParamPrior, load_checkpoint
 from pushtoknow.models.learned import LearnedModelsConfig, build_filter, build_learned_models
-from pushtoknow.training.data import load_push_tensors
 from pushtoknow.training.end_to_end import EndToEndConfig, evaluate_filter, window_loss
 from pushtoknow.training.pipeline import force_loss_fn, split_by_object
+from pushtoknow.training.push_tensors import load_push_tensors
 from tiny_training import (
     DATA_OBJECTS,
     DATA_PUSHES,

@@ -8,8 +8,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from pushtoknow.models.calibration import DIRECTIONS
-from pushtoknow.training.calibration import choose_weights, direction_nll, push_sequences
-from pushtoknow.training.data import load_push_tensors
+from pushtoknow.training.calibrate import choose_weights, direction_nll, push_sequences
+from pushtoknow.training.push_tensors import load_push_tensors
 from tiny_training import DATA_OBJECTS, DATA_PUSHES, SIGMA_POINTS, tiny_dataset, tiny_run
 
 
@@ -35,7 +35,7 @@ def test_direction_nll_is_the_gaussian_nll_in_the_basis():
 
 def test_dynamic_noise_scale_is_chosen_with_the_weights(tmp_path_factory):
     from pushtoknow.models.checkpoint import load_checkpoint
-    from pushtoknow.training.calibration import SequenceCalibrationConfig, calibrate_evidence
+    from pushtoknow.training.calibrate import SequenceCalibrationConfig, calibrate_evidence
 
     model = load_checkpoint(tiny_run(tmp_path_factory)).eval()
     pt = load_push_tensors(tiny_dataset(tmp_path_factory))
@@ -67,7 +67,7 @@ def test_dynamic_noise_scale_is_chosen_with_the_weights(tmp_path_factory):
 def test_each_profiles_weights_are_chosen_in_turn(tmp_path_factory):
     from pushtoknow.models.checkpoint import load_checkpoint
     from pushtoknow.testbed.push import PROFILES
-    from pushtoknow.training.calibration import (
+    from pushtoknow.training.calibrate import (
         SequenceCalibrationConfig,
         calibrate_evidence,
         run_sequences,
@@ -106,7 +106,7 @@ def test_each_profiles_weights_are_chosen_in_turn(tmp_path_factory):
 def test_a_capped_direction_takes_its_best_allowed_weight(tmp_path_factory):
     """max_weights bars the weights above a direction's cap; the others choose as before."""
     from pushtoknow.models.checkpoint import load_checkpoint
-    from pushtoknow.training.calibration import SequenceCalibrationConfig, calibrate_evidence
+    from pushtoknow.training.calibrate import SequenceCalibrationConfig, calibrate_evidence
 
     model = load_checkpoint(tiny_run(tmp_path_factory)).eval()
     pt = load_push_tensors(tiny_dataset(tmp_path_factory))
@@ -128,7 +128,7 @@ def test_a_capped_direction_takes_its_best_allowed_weight(tmp_path_factory):
 def test_max_weights_must_name_a_direction_and_allow_a_weight():
     from pydantic import ValidationError
 
-    from pushtoknow.training.calibration import SequenceCalibrationConfig
+    from pushtoknow.training.calibrate import SequenceCalibrationConfig
 
     with pytest.raises(ValidationError, match="unknown direction 'mass'"):
         SequenceCalibrationConfig(max_weights={"mass": 0.5})
@@ -142,7 +142,7 @@ def test_a_shared_error_discounts_the_later_pushes_of_a_profile(tmp_path_factory
     """run_sequences applies g_r(n) to the n-th push of each profile: r = 0 is the plain
     weights; with r near 1 only each profile's first push moves the belief."""
     from pushtoknow.models.checkpoint import load_checkpoint
-    from pushtoknow.training.calibration import SequenceCalibrationConfig, run_sequences
+    from pushtoknow.training.calibrate import SequenceCalibrationConfig, run_sequences
 
     model = load_checkpoint(tiny_run(tmp_path_factory)).eval()
     pt = load_push_tensors(tiny_dataset(tmp_path_factory))
@@ -175,8 +175,8 @@ def test_correlations_are_chosen_per_direction_with_the_weights(tmp_path_factory
     the scans of every other r, within its cap. The filter runs are replaced by an NLL known
     per direction as a function of (w, r), so the choice has a unique right answer."""
     from pushtoknow.models.checkpoint import load_checkpoint
-    from pushtoknow.training import calibration
-    from pushtoknow.training.calibration import SequenceCalibrationConfig, calibrate_evidence
+    from pushtoknow.training import calibrate as calibration
+    from pushtoknow.training.calibrate import SequenceCalibrationConfig, calibrate_evidence
 
     best_w = torch.tensor([0.5, 1.0, 1.0, 0.5, 0.0], dtype=torch.float64)
     best_r = torch.tensor([0.5, 0.0, 0.2, 0.2, 0.0], dtype=torch.float64)

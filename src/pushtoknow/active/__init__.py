@@ -5,7 +5,7 @@ A layer above `pushtoknow.filters` and below training/inference: plain tensors a
 interfaces only (no simulator).
 """
 
-from pushtoknow.active.policies import (
+from pushtoknow.active.information_policy import (
     ACTIVE_POLICY_NAMES,
     ActiveConfig,
     ActivePolicy,

@@ -14,7 +14,7 @@ import torch
 from torch.distributions import MultivariateNormal, kl_divergence
 
 from pushtoknow.filters.gaussian import DEFAULT_CHOLESKY, CholeskyConfig, safe_cholesky
-from pushtoknow.filters.shapes import expect_shape
+from pushtoknow.filters.tensor_shapes import expect_shape
 
 Dims = slice | Sequence[int] | None
 """A sub-block of the state: a slice, a sequence of indices, or None (the whole state)."""

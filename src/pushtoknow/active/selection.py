@@ -37,7 +37,7 @@ from pushtoknow.filters.gaussian import (
     symmetrize,
     wrap_residual,
 )
-from pushtoknow.filters.shapes import expect_shape
+from pushtoknow.filters.tensor_shapes import expect_shape
 
 ScoreName = Literal["kl", "entropy"]
 SCORES: tuple[str, ...] = ("kl", "entropy")

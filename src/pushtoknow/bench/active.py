@@ -18,12 +18,13 @@ import statistics
 import time
 from collections import defaultdict
 from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass
 
 import numpy as np
 import torch
 from torch import nn
 
-from pushtoknow.active.policies import ActivePolicy, look_ahead_steps
+from pushtoknow.active.information_policy import ActivePolicy, look_ahead_steps
 from pushtoknow.active.selection import SCORES
 from pushtoknow.bench import machine_description
 from pushtoknow.common.camera import CameraModel
@@ -136,6 +137,33 @@ class _ModuleTimer:
             h.remove()
 
 
+@dataclass(frozen=True)
+class ActiveDecisionSpeed:
+    """The result of `run_active_bench` (`pushtoknow bench active`): the median wall time of
+    one decision per score (`decision_s_median`, {score: s}); the settings (num_candidates M,
+    n_steps N of look-ahead, horizon_steps of a whole push, num_sigma_points C, encoder_mode,
+    threads, seed, repeats: timed decisions per score); the machine and its 1-min load average
+    at the start (None where unavailable); per score (`per_score`): {"policy",
+    "decision_s_median", "decision_s_min" (s), "decisions_timed", "chosen" (candidate index
+    per timed decision), "breakdown_s" ({part: s}), "breakdown_total_s", "network_calls"}."""
+
+    decision_s_median: dict[str, float]
+    num_candidates: int
+    n_steps: int
+    horizon_steps: int
+    num_sigma_points: int
+    encoder_mode: str
+    machine: str
+    threads: int
+    load_average_1min_at_start: float | None
+    seed: int
+    repeats: int
+    per_score: dict[str, dict]
+
+    def to_json(self) -> dict:
+        return asdict(self)
+
+
 def run_active_bench(
     seed: int = 0,
     num_candidates: int = 16,
@@ -144,13 +172,12 @@ def run_active_bench(
     horizon_fraction: float = HORIZON_FRACTION,
     num_threads: int = 1,
     scores: Sequence[str] = SCORES,
-) -> dict:
+) -> ActiveDecisionSpeed:
     """Time one active decision per score; see the module docstring.
 
     repeats: timed decisions per score after one untimed warm-up; num_threads: torch
-    intra-op threads (1: many small ops; restored afterwards). Returns {"decision_s_median":
-    {score: s}, "num_candidates", "n_steps", "num_sigma_points", "machine", "per_score":
-    {score: {"decision_s_median", "decision_s_min", "chosen", "breakdown_s"}}, ...}.
+    intra-op threads (1: many small ops; restored afterwards). Returns an
+    `ActiveDecisionSpeed`.
     """
     previous_threads = torch.get_num_threads()
     load_at_start = os.getloadavg()[0] if hasattr(os, "getloadavg") else None
@@ -218,17 +245,17 @@ def run_active_bench(
             }
     finally:
         torch.set_num_threads(previous_threads)
-    return {
-        "decision_s_median": {s: r["decision_s_median"] for s, r in per_score.items()},
-        "num_candidates": num_candidates,
-        "n_steps": n_steps,
-        "horizon_steps": horizon_steps,
-        "num_sigma_points": num_sigma_points,
-        "encoder_mode": filt.dynamics.encoding.config.mode,
-        "machine": f"{machine_description()}, torch {torch.__version__}",
-        "threads": num_threads,
-        "load_average_1min_at_start": load_at_start,
-        "seed": seed,
-        "repeats": repeats,
-        "per_score": per_score,
-    }
+    return ActiveDecisionSpeed(
+        decision_s_median={s: r["decision_s_median"] for s, r in per_score.items()},
+        num_candidates=num_candidates,
+        n_steps=n_steps,
+        horizon_steps=horizon_steps,
+        num_sigma_points=num_sigma_points,
+        encoder_mode=filt.dynamics.encoding.config.mode,
+        machine=f"{machine_description()}, torch {torch.__version__}",
+        threads=num_threads,
+        load_average_1min_at_start=load_at_start,
+        seed=seed,
+        repeats=repeats,
+        per_score=per_score,
+    )

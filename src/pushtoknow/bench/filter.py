@@ -15,6 +15,7 @@ import platform
 import statistics
 import time
 from collections.abc import Sequence
+from dataclasses import asdict, dataclass
 
 import torch
 
@@ -81,6 +82,36 @@ def _time_steps(
     return times, statistics.mean(stages)
 
 
+@dataclass(frozen=True)
+class FilterSpeed:
+    """The result of `run_filter_bench` (`pushtoknow bench filter`). Of the default variant
+    (`default_variant`, the first): the median wall time of one step of one object
+    (`step_ms_median`, ms) and the batched throughput (`object_steps_per_s`, object-steps per
+    s). The settings: seed, batch (objects in the batched step), sigma_points (C), repeats
+    (timed steps), threads ({"single": intra-op threads of the single-object run,
+    "batched_tried": those the batch was timed with}); the machine and its 1-min load average
+    at the start (None where unavailable); targets ({"step_ms", "object_steps_per_s"}); per
+    variant name (`variants`): {"encoder_mode", "crop_size" (px or None), "step_ms_median",
+    "step_ms_min", "tempering_stages_mean", "batched_step_ms_median", "batched_threads",
+    "batched_step_ms_by_threads" ({threads: ms}), "object_steps_per_s", "meets_targets"}."""
+
+    step_ms_median: float
+    object_steps_per_s: float
+    default_variant: str
+    machine: str
+    seed: int
+    batch: int
+    sigma_points: int
+    repeats: int
+    threads: dict[str, int | list[int]]
+    load_average_1min_at_start: float | None
+    targets: dict[str, float]
+    variants: dict[str, dict]
+
+    def to_json(self) -> dict:
+        return asdict(self)
+
+
 def run_filter_bench(
     seed: int = 0,
     batch: int = 32,
@@ -88,13 +119,13 @@ def run_filter_bench(
     repeats: int = 20,
     variants: Sequence[tuple[str, str, int | None]] = DEFAULT_VARIANTS,
     num_threads: int | None = None,
-) -> dict:
+) -> FilterSpeed:
     """Time one predict + update of the dual filter; see the module docstring.
 
     variants: (name, encoder mode, crop size or None); the first is the reported default.
     num_threads: torch intra-op threads for both measurements (default: 1 for the single
     object; the batch with 1 and with all cores, the faster reported); restored afterwards.
-    Returns {"step_ms_median", "object_steps_per_s", "machine", "variants": {...}, ...}.
+    Returns a `FilterSpeed`.
     """
     previous_threads = torch.get_num_threads()
     load_at_start = os.getloadavg()[0] if hasattr(os, "getloadavg") else None
@@ -152,20 +183,20 @@ def run_filter_bench(
     finally:
         torch.set_num_threads(previous_threads)
     default = results[variants[0][0]]
-    return {
-        "step_ms_median": default["step_ms_median"],
-        "object_steps_per_s": default["object_steps_per_s"],
-        "default_variant": variants[0][0],
-        "machine": (
+    return FilterSpeed(
+        step_ms_median=default["step_ms_median"],
+        object_steps_per_s=default["object_steps_per_s"],
+        default_variant=variants[0][0],
+        machine=(
             f"{platform.machine()} {platform.processor() or platform.system()}, "
             f"{cores} cores, torch {torch.__version__}"
         ),
-        "seed": seed,
-        "batch": batch,
-        "sigma_points": sigma_points,
-        "repeats": repeats,
-        "threads": {"single": single_threads, "batched_tried": batched_options},
-        "load_average_1min_at_start": load_at_start,
-        "targets": {"step_ms": TARGET_STEP_MS, "object_steps_per_s": TARGET_OBJECT_STEPS_PER_S},
-        "variants": results,
-    }
+        seed=seed,
+        batch=batch,
+        sigma_points=sigma_points,
+        repeats=repeats,
+        threads={"single": single_threads, "batched_tried": batched_options},
+        load_average_1min_at_start=load_at_start,
+        targets={"step_ms": TARGET_STEP_MS, "object_steps_per_s": TARGET_OBJECT_STEPS_PER_S},
+        variants=results,
+    )

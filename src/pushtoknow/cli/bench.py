@@ -38,7 +38,7 @@ def bench_sim(
     seed: int = seed_option(),
 ):
     """Simulator real-time factor (64×64 RGB-D + tactile at 10 Hz, one process)."""
-    from pushtoknow.bench.sim import run_sim_bench
+    from pushtoknow.bench.throughput import run_sim_bench
 
     res = run_sim_bench(pushes=pushes, seed=seed)
     print_result(res.to_json(), as_json, "simulator speed")
@@ -59,7 +59,7 @@ def bench_physics(
 ):
     """Physics fidelity of the testbed: chaos, quasi-static pushing, Coulomb release, what
     the 10 Hz record reveals, simulation speed (docs/PHYSICS.md)."""
-    from pushtoknow.bench.physics import render_markdown, run_physics_bench
+    from pushtoknow.bench.physics_fidelity import render_markdown, run_physics_bench
 
     earlier = None
     if before is not None:
@@ -85,7 +85,7 @@ def bench_filter(as_json: bool = typer.Option(False, "--json"), seed: int = seed
     from pushtoknow.bench.filter import run_filter_bench
 
     res = run_filter_bench(seed=seed)
-    print_result(res, as_json, "filter latency and throughput")
+    print_result(res.to_json(), as_json, "filter latency and throughput")
 
 
 @bench_app.command("active")
@@ -100,7 +100,7 @@ def bench_active(
     from pushtoknow.bench.active import run_active_bench
 
     res = run_active_bench(seed=seed, num_candidates=candidates, num_sigma_points=sigma_points)
-    print_result(res, as_json, "active push decision")
+    print_result(res.to_json(), as_json, "active push decision")
 
 
 @bench_app.command("scaling")
@@ -164,7 +164,7 @@ def bench_estimator_cmd(
 ):
     """An estimator's speed (seconds per update, per object) and accuracy (normalised error,
     90% coverage, means outside their own interval) on simulated objects."""
-    from pushtoknow.bench.estimator import bench_estimator, default_objects
+    from pushtoknow.bench.estimator_accuracy import bench_estimator, default_objects
     from pushtoknow.models.checkpoint import load_checkpoint
     from pushtoknow.pretrained import resolve_model_path
 
@@ -300,7 +300,7 @@ def bench_sysid_cmd(
     """mujoco.sysid as a baseline: the pushes bench estimator runs with the physics estimator
     and the uniform policy, fitted by MuJoCo's own system identification given the true outline
     (the known-scene case): accuracy, 90% coverage, seconds and rollouts per object."""
-    from pushtoknow.bench.estimator import default_objects
+    from pushtoknow.bench.estimator_accuracy import default_objects
     from pushtoknow.bench.sysid import bench_sysid
     from pushtoknow.models.checkpoint import load_checkpoint
     from pushtoknow.pretrained import resolve_model_path

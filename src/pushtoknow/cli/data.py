@@ -80,8 +80,7 @@ def simulate(
     except (PushToKnowError, ValueError) as e:
         fail(e)
     console.print(
-        f"wrote {res['shards_written']} shards, skipped {res['shards_skipped']} "
-        f"finished ones → {out}"
+        f"wrote {res.shards_written} shards, skipped {res.shards_skipped} finished ones → {out}"
     )
 
 
@@ -156,7 +155,7 @@ def import_mit(
         )
     except PushToKnowError as e:
         fail(e)
-    print_result(res, as_json, f"imported into {out}")
+    print_result(res.to_json(), as_json, f"imported into {out}")
 
 
 @app.command()

@@ -86,7 +86,8 @@ def evaluate_heldout_cmd(
             progress=lambda: bar.advance(task),
             profiles=profile_names,
         )
-    metrics = heldout_metrics(run)
+    result = heldout_metrics(run)
+    metrics = result.to_json()
     metrics.update(
         {
             "model": str(path),
@@ -117,8 +118,8 @@ def evaluate_heldout_cmd(
     for c in ["after push", *PARAM_NAMES, "overall", "μ·m", "coverage90"]:
         t.add_column(c, justify="right")
     fmt = lambda r: [f"{r[k]:.3f}" for k in (*PARAM_NAMES, "overall", "mu_m")]  # noqa: E731
-    t.add_row("prior mean", *fmt(metrics["prior_mean"]), "")
-    for r in metrics["per_push"]:
+    t.add_row("prior mean", *fmt(result.prior_mean), "")
+    for r in result.per_push:
         t.add_row(str(r["push"]), *fmt(r), f"{r['coverage90']['overall']:.2f}")
     console.print(t)
 
@@ -147,7 +148,7 @@ def ablate_profiles_cmd(
     when the policy may or may not use release pushes, on the same held-out objects."""
     from rich.progress import Progress
 
-    from pushtoknow.common.policies import POLICY_NAMES
+    from pushtoknow.common.policy_names import POLICY_NAMES
     from pushtoknow.evaluation.heldout import heldout_object_ids
     from pushtoknow.evaluation.profiles import (
         DEFAULT_CONDITIONS,
@@ -223,6 +224,12 @@ def evaluate_cmd(
         help="comma-separated policies the physics estimator is evaluated under (rows "
         "physics:POLICY), 'none' for none; default: the config's (uniform)",
     ),
+    physics_sets: str = typer.Option(
+        None,
+        "--physics-sets",
+        help="comma-separated sets (heldout, novel, random) with physics rows; default: every "
+        "set (the physics filter takes 1–5 min per object on 2 cores)",
+    ),
     random_objects: int = typer.Option(
         None, "--random-objects", min=0, help="random-shape set size (default: the config's, 0)"
     ),
@@ -252,6 +259,8 @@ def evaluate_cmd(
     if physics_policies is not None:
         names = [p.strip() for p in physics_policies.split(",") if p.strip()]
         overrides["physics_policies"] = () if names == ["none"] else tuple(names)
+    if physics_sets is not None:
+        overrides["physics_sets"] = tuple(p.strip() for p in physics_sets.split(",") if p.strip())
     cfg = cfg.model_copy(update={k: v for k, v in overrides.items() if v is not None})
     cfg = EvaluationConfig.model_validate(cfg.model_dump())
     refs = [r for m in models for r in m.split(",") if r]
@@ -376,7 +385,7 @@ def ridge_cmd(
     from pushtoknow.evaluation.ridge import RIDGE_PARTS, ridge_misfit
     from pushtoknow.models.checkpoint import load_checkpoint
     from pushtoknow.pretrained import resolve_model_path
-    from pushtoknow.training.data import load_push_tensors
+    from pushtoknow.training.push_tensors import load_push_tensors
 
     try:
         trained = load_checkpoint(resolve_model_path(model)).eval()

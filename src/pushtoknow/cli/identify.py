@@ -231,21 +231,19 @@ def identify_bench_cmd(
     if markdown is not None:
         from pushtoknow.reporting.results import identification_markdown
 
-        markdown.write_text(identification_markdown([res], [command_line(ctx)]) + "\n")
-    if save_and_print_json(res, out, as_json):
+        markdown.write_text(identification_markdown([res.to_json()], [command_line(ctx)]) + "\n")
+    if save_and_print_json(res.to_json(), out, as_json):
         return
-    t = Table(
-        title=f"identification on {objects} novel objects, pushes: {', '.join(res['profiles'])}"
-    )
+    t = Table(title=f"identification on {objects} novel objects, pushes: {', '.join(res.profiles)}")
     for c in ["", *PARAM_NAMES, "overall"]:
         t.add_column(c, justify="right")
-    t.add_row("NRMSE", *[f"{res['nrmse'][k]:.3f}" for k in (*PARAM_NAMES, "overall")])
-    t.add_row("coverage 90%", *[f"{res['coverage90'][k]:.2f}" for k in (*PARAM_NAMES, "overall")])
+    t.add_row("NRMSE", *[f"{res.nrmse[k]:.3f}" for k in (*PARAM_NAMES, "overall")])
+    t.add_row("coverage 90%", *[f"{res.coverage90[k]:.2f}" for k in (*PARAM_NAMES, "overall")])
     console.print(t)
-    rel = res["mu_m_relative_error"]
+    rel = res.mu_m_relative_error
     console.print(
         f"μ·m relative error: median {rel['median']:.2%}, max {rel['max']:.2%}; "
-        f"median {res['seconds_per_object']['median']:.1f} s and "
-        f"{res['rollouts_per_object']['median']:.0f} rollouts per object ({workers} workers)"
+        f"median {res.seconds_per_object['median']:.1f} s and "
+        f"{res.rollouts_per_object['median']:.0f} rollouts per object ({workers} workers)"
     )
-    console.print(f"not identified (objects): {res['unidentified'] or 'none'}")
+    console.print(f"not identified (objects): {res.unidentified or 'none'}")

@@ -12,12 +12,12 @@ import typer
 from pushtoknow.cli import (  # noqa: F401 (commands)
     bench,
     data,
+    evaluate_real,
     evaluation,
     identify,
     models,
-    real_benchmark,
 )
-from pushtoknow.cli.real import register as _register_real
+from pushtoknow.cli.estimate_real import register as _register_real
 from pushtoknow.cli.shared import app, err_console, print_error, validation_summary
 from pushtoknow.common.errors import DiskFullError, PushToKnowError, first_line
 

@@ -10,7 +10,7 @@ from rich.markup import escape
 
 from pushtoknow.common.estimators import DEFAULT_ESTIMATOR, ESTIMATOR_NAMES
 from pushtoknow.common.params import MIN_SIGMA_POINTS
-from pushtoknow.common.policies import POLICY_NAMES
+from pushtoknow.common.policy_names import POLICY_NAMES
 
 SEED_HELP = "random seed (≥ 0): same seed, same result on the CPU"
 

@@ -41,7 +41,7 @@ from pushtoknow.common.errors import DatasetError
 from pushtoknow.common.files import file_sha256
 from pushtoknow.common.parallel import Workers
 from pushtoknow.common.params import MIN_SIGMA_POINTS
-from pushtoknow.common.policies import POLICY_NAMES, PolicyName
+from pushtoknow.common.policy_names import POLICY_NAMES, PolicyName
 from pushtoknow.datasets.generate import (
     GENERATION_FILE,
     objects_file_sha256,

@@ -63,7 +63,7 @@ from pydantic import Field, field_validator
 from pushtoknow.common.config import Config
 from pushtoknow.common.errors import DatasetError
 from pushtoknow.common.params import MIN_SIGMA_POINTS
-from pushtoknow.common.policies import POLICY_NAMES, PolicyName
+from pushtoknow.common.policy_names import POLICY_NAMES, PolicyName
 from pushtoknow.testbed.config import SimConfig
 from pushtoknow.training.pipeline import TrainConfig
 
@@ -214,9 +214,9 @@ def validation_loss(
     module docstring), cached in `model_dir/validation.json`."""
     from pushtoknow.models.checkpoint import load_checkpoint
     from pushtoknow.perception.visnet import visnet_measure
-    from pushtoknow.training.data import compute_vision_poses, load_push_tensors
     from pushtoknow.training.end_to_end import evaluate_filter
-    from pushtoknow.training.visnet import perturb
+    from pushtoknow.training.fit_visnet import perturb
+    from pushtoknow.training.push_tensors import compute_vision_poses, load_push_tensors
 
     cache = Path(model_dir) / "validation.json"
     if cache.exists():

@@ -43,13 +43,15 @@ def _fsync(path: Path) -> None:
 
 def atomic_write_set(files: Mapping[Path, Content]) -> list[Path]:
     """Write every file of `files` ({path: bytes, text or writer(tmp path)}) to its temporary
-    name, then rename them all into place; returns the paths. On an error nothing is renamed
-    and the temporary files are removed: a full disk raises `DiskFullError` naming the file,
-    anything else is re-raised."""
+    name, then rename them all into place; returns the paths. Missing parent folders are made
+    (a report asked for in a new folder is written, not lost after the work). On an error
+    nothing is renamed and the temporary files are removed: a full disk raises `DiskFullError`
+    naming the file, anything else is re-raised."""
     staged: list[tuple[Path, Path]] = []
     try:
         for path, content in files.items():
             path = Path(path)
+            path.parent.mkdir(parents=True, exist_ok=True)
             tmp = tmp_path(path)
             staged.append((tmp, path))
             if isinstance(content, bytes):

@@ -9,6 +9,7 @@ from __future__ import annotations
 import hashlib
 import json
 import re
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Literal
 
@@ -272,11 +273,25 @@ def write_pending_shards(
     return len(todo), skipped
 
 
+@dataclass(frozen=True)
+class GenerationResult:
+    """The result of `generate_dataset` (`pushtoknow simulate`): shards written by this call,
+    shards skipped (already finished, from an earlier run) and the objects of the dataset
+    (`GenerationConfig.objects`, over all shards)."""
+
+    shards_written: int
+    shards_skipped: int
+    objects: int
+
+    def to_json(self) -> dict:
+        return asdict(self)
+
+
 def generate_dataset(
     out: Path, cfg: GenerationConfig, workers: Workers = 1, progress: bool = True
-) -> dict:
+) -> GenerationResult:
     """Generate (or resume) a dataset in `out` on `workers` (local processes or a
-    `TaskRunner`). Returns counts of written and skipped shards."""
+    `TaskRunner`). Returns counts of written and skipped shards (`GenerationResult`)."""
     out = Path(out)
     select_objects(cfg.objects_from, cfg.objects, cfg.seed)  # validate early, in the parent
     digest = objects_file_sha256(cfg.objects_from)
@@ -297,4 +312,4 @@ def generate_dataset(
             "simulating",
             progress,
         )
-    return {"shards_written": written, "shards_skipped": skipped, "objects": cfg.objects}
+    return GenerationResult(shards_written=written, shards_skipped=skipped, objects=cfg.objects)

@@ -39,7 +39,7 @@ Conventions of the converted data (all SI):
 - **Tactile.** (F_x, F_y, contact) with the reader's force on the object in world axes, tared
   and averaged over the window ending at t_k, [t_k - 1/rate, t_k), the simulator's timing;
   contact ∈ {0, 1} (the reader's ‖F‖ > 0.5 N, not the simulator's contact share). Real data
-  have no noiseless force, so ``force_clean`` holds the same measured force. Sample 0 differs
+  have no noiseless force: ``force_clean`` is None (not stored). Sample 0 differs
   from the simulator's, which is zero: it is the force of the window before t_start when the
   force stream has samples there, else the first force reading (see `read_mit_push`).
 - **Pusher** = tip positions (shifted); the pad is rendered with the probe's radius.
@@ -67,6 +67,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
@@ -112,6 +113,7 @@ __all__ = [
     "MIN_DIRECTION_DISPLACEMENT",
     "TACTILE_CONVENTION",
     "TIME_SCALE_CONVENTION",
+    "MitImportResult",
     "MitRenderer",
     "convert_push",
     "import_mit_dataset",
@@ -126,7 +128,7 @@ __all__ = [
 IMPORT_FILE = "import.json"
 # bump when the conversion changes what is written. 2: tactile sample k averages the window
 # ending at t_k (was: starting at t_k); contact spans shifted by one sample accordingly.
-IMPORT_VERSION = 2
+IMPORT_VERSION = 3  # 3: no force_clean stored (real pushes have none)
 SOURCE_TAG = "mit-push"
 MIT_HEIGHT = DEFAULT_HEIGHT  # m, 13 mm stainless steel plates
 # μ placeholder when no push of an object gives a valid estimate: the middle of the catalogue's
@@ -305,7 +307,7 @@ def convert_push(
         time=np.asarray(push.times, dtype=np.float64) * float(time_scale),
         pose=pose,
         tactile=np.column_stack([force, push.contact.astype(np.float64)]),
-        force_clean=force.copy(),
+        force_clean=None,
         pusher=pusher,
         rgb=rgb,
         depth=depth,
@@ -437,6 +439,23 @@ def _write_shard_with_attrs(
     )
 
 
+@dataclass(frozen=True)
+class MitImportResult:
+    """The result of `import_mit_dataset` (`pushtoknow import-mit`): the MIT Push files matching
+    the filters; the pushes converted by this call (0 when every shard was already finished);
+    the objects (one per (surface, shape)) in the selection; the shards written by this call
+    and those skipped as already finished."""
+
+    files: int
+    pushes: int
+    objects: int
+    shards_written: int
+    shards_skipped: int
+
+    def to_json(self) -> dict:
+        return asdict(self)
+
+
 def import_mit_dataset(
     src: Path,
     out: Path,
@@ -449,7 +468,7 @@ def import_mit_dataset(
     objects_per_shard: int = 4,
     progress: bool = True,
     as_speed: float | None = None,
-) -> dict:
+) -> MitImportResult:
     """Convert (or resume converting) MIT Push files under `src` into shards in `out`.
 
     Filters as in `find_mit_push_files`: surface (e.g. "plywood"), shape (e.g. "rect1"),
@@ -464,8 +483,8 @@ def import_mit_dataset(
     Resuming: finished shards whose fingerprint (relative file names, filters, rate, layout,
     render config) matches are skipped; the source's absolute path is recorded, not compared.
 
-    Returns {"files": matching files, "pushes": pushes converted by this call,
-    "objects": objects in the selection, "shards_written", "shards_skipped"}.
+    Returns a `MitImportResult` (files matching, pushes converted by this call, objects in the
+    selection, shards written and skipped).
     Raises `DatasetError` when no file matches (naming `src` and the filters), when `out` holds
     a dataset made with other settings, or naming a corrupt source file.
     """
@@ -518,7 +537,7 @@ def _prepare_out(out, src, files, plan, settings, fingerprint, digests, as_speed
             "shift_convention": SHIFT_CONVENTION,
             "friction_convention": FRICTION_CONVENTION,
             "tactile_convention": TACTILE_CONVENTION,
-            "force_clean": "the measured force (real data have no noiseless force)",
+            "force_clean": "none (real data have no noiseless force)",
             "object": f"MIT catalogue mass and I_z, CoM at the centroid, height {MIT_HEIGHT} m",
             "shards": [
                 {
@@ -545,7 +564,9 @@ def _prepare_out(out, src, files, plan, settings, fingerprint, digests, as_speed
         stale.unlink()
 
 
-def _import_pending(out, src, files, plan, fingerprint, cfg, rate, as_speed, progress) -> dict:
+def _import_pending(
+    out, src, files, plan, fingerprint, cfg, rate, as_speed, progress
+) -> MitImportResult:
     """Convert and write the shards of `plan` not yet finished in `out`."""
     sim_json = cfg.model_dump_json()
     todo = [i for i in range(len(plan)) if not shard_is_finished(shard_path(out, i), fingerprint)]
@@ -579,13 +600,13 @@ def _import_pending(out, src, files, plan, fingerprint, cfg, rate, as_speed, pro
     finally:
         for r in renderers.values():
             r.close()
-    return {
-        "files": len(files),
-        "pushes": converted,
-        "objects": sum(len(objs) for objs in plan),
-        "shards_written": len(todo),
-        "shards_skipped": skipped,
-    }
+    return MitImportResult(
+        files=len(files),
+        pushes=converted,
+        objects=sum(len(objs) for objs in plan),
+        shards_written=len(todo),
+        shards_skipped=skipped,
+    )
 
 
 def _convert_object(

@@ -466,7 +466,7 @@ def records_from_pushes(
     sign). A clock off k / rate (jitter, or another rate than the recording's) is resampled
     (`_resample`) and said in the returned meta's notes, as is a move of the object frame to
     the outline's centroid. Records: time from 0 s, θ unwrapped, tactile = (force, contact),
-    force_clean = force (a recording has no noiseless force), no S_0.
+    no force_clean (a recording has no noiseless force), no S_0.
     """
     where = Path(where)
     if not raws:
@@ -533,7 +533,7 @@ def records_from_pushes(
                 time=time,
                 pose=pose,
                 tactile=np.column_stack([force, contact]),
-                force_clean=force.copy(),
+                force_clean=None,
                 pusher=a["pusher"],
                 rgb=a.get("rgb"),
                 depth=a.get("depth"),

@@ -8,7 +8,7 @@ complete, so a finished shard is never half-written. Layout:
     /objects/<i>            attrs: spec (JSON), params (5,) SI, object_index
     /objects/<i>/pushes/<k> attrs: action (5,) [cp_x, cp_y, pd, v, profile index], profile
         time (T,) s · pose (T, 3) x, y, θ (unwrapped) · tactile (T, 3) F_x, F_y (N), contact
-        force_clean (T, 2) N · pusher (T, 2) m · s0 (H, W) bool
+        force_clean (T, 2) N (simulated pushes only) · pusher (T, 2) m · s0 (H, W) bool
         rgb (T, H, W, 3) uint8 · depth (T, H, W) float16 metres (±0.3 mm at 0.75 m)
 Image datasets are chunked one frame per chunk and gzip-compressed. Integrity: every dataset
 carries HDF5's Fletcher-32 checksum (a corrupt chunk fails to read, naming the dataset), and
@@ -109,8 +109,9 @@ def _shard_bytes(
                 p = pushes.create_group(str(k))
                 p.attrs.update(action=r.push.as_array(), profile=r.push.profile)
                 p.attrs.update(push_attrs[e][k] if push_attrs else {})
-                for name in ("time", "pose", "tactile", "force_clean", "pusher"):
-                    p.create_dataset(name, data=getattr(r, name), **CHECKSUM)
+                for name in PushRecord.TRACKS:  # force_clean: absent for a real push
+                    if getattr(r, name) is not None:
+                        p.create_dataset(name, data=getattr(r, name), **CHECKSUM)
                 p.create_dataset("s0", data=r.s0, **COMPRESSION)
                 if r.outline_mask is not None:
                     p.create_dataset("outline_mask", data=r.outline_mask, **COMPRESSION)
@@ -260,7 +261,8 @@ def _read(path: Path, grp, name: str):
 def read_push(path: Path, grp: h5py.Group, images: bool = True) -> PushRecord:
     """Read one push group into a PushRecord."""
     push = Push.from_array(grp.attrs["action"])
-    fields = {n: _read(path, grp, n) for n in ("time", "pose", "tactile", "force_clean", "pusher")}
+    fields = {n: _read(path, grp, n) for n in PushRecord.TRACKS if n != "force_clean"}
+    fields["force_clean"] = _read(path, grp, "force_clean") if "force_clean" in grp else None
     rgb = depth = None
     if images:
         rgb = _read(path, grp, "rgb")

@@ -7,7 +7,7 @@ parallel processes, each seeded by (seed, object id), so results do not depend o
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 
 import numpy as np
 
@@ -17,6 +17,7 @@ from pushtoknow.common.params import product_moments
 from pushtoknow.evaluation.metrics import coverage, nrmse, product_nrmse
 from pushtoknow.inference.policies import PushDecision, PushPolicy
 from pushtoknow.testbed.push import Push
+from pushtoknow.testbed.sim import PushRecord, stack_records
 
 LEARNED_ESTIMATOR = "vt-addf"  # the estimator these runs use unless told (the paper's filter)
 
@@ -39,10 +40,14 @@ class HeldoutRun:
     features_truth: np.ndarray | None = None  # (N, K, F) forest features, true poses
     features_vision: np.ndarray | None = None  # (N, K, F) forest features, filtered poses
     profiles: list[list[str]] | None = None  # (N, K) speed profile of each executed push
-    push_actions: np.ndarray | None = None  # (N, K, 5) Push.as_array of each executed push
-    push_tracks: np.ndarray | None = None  # (N, K, T, 9) time, pose (3), tactile (3), pusher (2)
+    pushes: list[list[PushRecord]] | None = None  # (N, K) executed pushes, without images
     lower: np.ndarray | None = None
     upper: np.ndarray | None = None
+
+    @property
+    def push_actions(self) -> np.ndarray | None:
+        """(N, K, 5) `Push.as_array` of each executed push (None without `pushes`)."""
+        return None if self.pushes is None else stack_records(self.pushes)["action"]
 
 
 class ReplayPolicy(PushPolicy):
@@ -117,38 +122,8 @@ def _run_one(args) -> dict:
         "truth": spec.params.as_array(),
         "seconds": time.perf_counter() - t0,
         "profiles": [rec.push.profile for rec in res.records],
-        "push_actions": np.stack([rec.push.as_array() for rec in res.records]),
-        "push_tracks": np.stack([track_array(rec) for rec in res.records]),
+        "pushes": [rec.tracks_only() for rec in res.records],
     }
-
-
-def track_array(rec) -> np.ndarray:
-    """(T, 9) what physics-based identification needs of a push record: time, pose (3),
-    tactile (3), pusher (2)."""
-    return np.column_stack([rec.time, rec.pose, rec.tactile, rec.pusher])
-
-
-def records_from_tracks(actions: np.ndarray, tracks: np.ndarray) -> list:
-    """PushRecords (no images, no clean force) from `track_array` rows and actions (K, 5)."""
-    from pushtoknow.testbed.push import Push
-    from pushtoknow.testbed.sim import PushRecord
-
-    out = []
-    for a, tr in zip(actions, tracks):
-        out.append(
-            PushRecord(
-                Push.from_array(a),
-                tr[:, 0],
-                tr[:, 1:4],
-                tr[:, 4:7],
-                tr[:, 4:6],
-                tr[:, 7:9],
-                None,
-                None,
-                None,
-            )
-        )
-    return out
 
 
 def heldout_object_ids(n: int, seed: int = 0) -> list[str]:
@@ -210,14 +185,29 @@ def evaluate_heldout(
         features_truth=np.stack([r["features_truth"] for r in out]),
         features_vision=np.stack([r["features_vision"] for r in out]),
         profiles=[r["profiles"] for r in out],
-        push_actions=np.stack([r["push_actions"] for r in out]),
-        push_tracks=np.stack([r["push_tracks"] for r in out]),
+        pushes=[r["pushes"] for r in out],
         lower=np.stack([r["lower"] for r in out]),
         upper=np.stack([r["upper"] for r in out]),
     )
 
 
-def heldout_metrics(run: HeldoutRun, prior_truth: np.ndarray | None = None) -> dict:
+@dataclass(frozen=True)
+class HeldoutMetrics:
+    """The accuracy of a `HeldoutRun` (`heldout_metrics`): one row per push (`per_push`, K + 1,
+    row 0 = the prior the filter starts from): {"push": index, NRMSE per parameter and
+    "overall", "mu_m": NRMSE of μ·m, "coverage90" / "coverage68": {parameter and "overall":
+    share of the truths inside the interval}}; the prior-mean predictor's NRMSE per parameter,
+    "overall" and "mu_m" (`prior_mean`); the number of objects."""
+
+    per_push: list[dict]
+    prior_mean: dict[str, float]
+    objects: int
+
+    def to_json(self) -> dict:
+        return asdict(self)
+
+
+def heldout_metrics(run: HeldoutRun, prior_truth: np.ndarray | None = None) -> HeldoutMetrics:
     """NRMSE per parameter, overall and of μ·m, and 68%/90% coverage, after every push (index 0
     = the prior the filter starts from); `prior_mean` row: the prior-mean predictor, i.e. the
     training objects' mean (`prior_truth` (M, 5) SI; default: the filter's prior mean)."""
@@ -236,4 +226,4 @@ def heldout_metrics(run: HeldoutRun, prior_truth: np.ndarray | None = None) -> d
         prior_mean = run.mean[0, 0]
     pm = np.tile(prior_mean, (len(run.truth), 1))
     prior_row = {**nrmse(pm, run.truth), "mu_m": product_nrmse(pm, run.truth)}
-    return {"per_push": per_push, "prior_mean": prior_row, "objects": len(run.truth)}
+    return HeldoutMetrics(per_push=per_push, prior_mean=prior_row, objects=len(run.truth))

@@ -18,6 +18,7 @@ median seconds and rollouts per object.
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass
 
 import numpy as np
 
@@ -37,6 +38,41 @@ def push_profiles(profiles: Sequence[str], pushes: int) -> list[str]:
     return [profiles[k % len(profiles)] for k in range(pushes)]
 
 
+@dataclass(frozen=True)
+class IdentificationBenchmark:
+    """The result of `run_identification_benchmark` (`pushtoknow identify-bench`): the method;
+    the settings (objects, pushes per object, the profile of each push, seed, pose_noise
+    [position m, angle rad], workers); NRMSE of the posterior mean per parameter and "overall"
+    (`nrmse`) and of μ·m (`mu_m_nrmse`); μ·m relative error {"median", "max",
+    "share_within_2pct"}; 90% / 68% coverage per parameter and "overall"; how many objects
+    each direction was not identified on (`unidentified`); poor fits (objects); seconds per
+    object {"median", "max"}; rollouts per object {"median", "push_rollouts_median"}; the
+    parameter names (SI order of the arrays); one row per object (`per_object`: "object",
+    "truth" (5,) SI and `identify`'s result as a dict)."""
+
+    method: str
+    objects: int
+    pushes: int
+    profiles: list[str]
+    seed: int
+    pose_noise: list[float]
+    nrmse: dict[str, float]
+    mu_m_nrmse: float
+    mu_m_relative_error: dict[str, float]
+    coverage90: dict[str, float]
+    coverage68: dict[str, float]
+    unidentified: dict[str, int]
+    poor_fits: int
+    seconds_per_object: dict[str, float]
+    rollouts_per_object: dict[str, float]
+    workers: int
+    parameters: list[str]
+    per_object: list[dict]
+
+    def to_json(self) -> dict:
+        return asdict(self)
+
+
 def run_identification_benchmark(
     objects: int,
     pushes: int,
@@ -44,9 +80,9 @@ def run_identification_benchmark(
     seed: int = 0,
     config: IdentifyConfig | None = None,
     progress: Callable[[str], None] | None = None,
-) -> dict:
+) -> IdentificationBenchmark:
     """Identify `objects` novel objects from `pushes` simulated pushes each; returns the
-    summary (see the module docstring) and per-object rows."""
+    summary (see the module docstring) and per-object rows (`IdentificationBenchmark`)."""
     cfg = config or IdentifyConfig()
     sim = SimConfig(render=False)
     specs = novel_objects(objects, seed)
@@ -84,36 +120,36 @@ def run_identification_benchmark(
     for r in rows:
         for d in r["unidentified"]:
             unidentified[d] = unidentified.get(d, 0) + 1
-    return {
-        "method": "physics-based identification (upper bound: exact simulator, true footprint)",
-        "objects": objects,
-        "pushes": pushes,
-        "profiles": plan,
-        "seed": seed,
-        "pose_noise": [cfg.position_noise, cfg.angle_noise],
-        "nrmse": nrmse(mean, truth),
-        "mu_m_nrmse": product_nrmse(mean, truth, prod),
-        "mu_m_relative_error": {
+    return IdentificationBenchmark(
+        method="physics-based identification (upper bound: exact simulator, true footprint)",
+        objects=objects,
+        pushes=pushes,
+        profiles=plan,
+        seed=seed,
+        pose_noise=[cfg.position_noise, cfg.angle_noise],
+        nrmse=nrmse(mean, truth),
+        mu_m_nrmse=product_nrmse(mean, truth, prod),
+        mu_m_relative_error={
             "median": float(np.median(rel)),
             "max": float(np.max(rel)),
             "share_within_2pct": float(np.mean(rel <= 0.02)),
         },
-        "coverage90": coverage(z, 0.9),
-        "coverage68": coverage(z, 0.68),
-        "unidentified": unidentified,
-        "poor_fits": int(sum(r["poor_fit"] for r in rows)),
-        "seconds_per_object": {
+        coverage90=coverage(z, 0.9),
+        coverage68=coverage(z, 0.68),
+        unidentified=unidentified,
+        poor_fits=int(sum(r["poor_fit"] for r in rows)),
+        seconds_per_object={
             "median": float(np.median([r["seconds"] for r in rows])),
             "max": float(np.max([r["seconds"] for r in rows])),
         },
-        "rollouts_per_object": {
+        rollouts_per_object={
             "median": float(np.median([r["rollouts"] for r in rows])),
             "push_rollouts_median": float(np.median([r["push_rollouts"] for r in rows])),
         },
-        "workers": cfg.workers,
-        "parameters": list(PARAM_NAMES),
-        "per_object": rows,
-    }
+        workers=cfg.workers,
+        parameters=list(PARAM_NAMES),
+        per_object=rows,
+    )
 
 
 ORACLE = "oracle"
@@ -130,7 +166,6 @@ def oracle_run(
     interval (the prior's from the same log-normal / Gaussian marginals as its mean)."""
     from pushtoknow.common.estimate import estimate_from_belief
     from pushtoknow.common.params import normalise_params, product_moments
-    from pushtoknow.evaluation.heldout import records_from_tracks
     from pushtoknow.identification.prior import prior_moments
     from pushtoknow.testbed.object_refs import load_object_spec
 
@@ -143,7 +178,7 @@ def oracle_run(
     with RolloutPool(workers) as pool:
         for i, ref in enumerate(objects):
             spec = load_object_spec(ref)
-            records = records_from_tracks(base.push_actions[i], base.push_tracks[i].copy())
+            records = [r.tracks_only() for r in base.pushes[i]]  # copies: noise is added
             # the recorded poses are exact: the tracking noise the fit assumes is added, as in
             # `run_identification_benchmark`, so its χ² keeps its meaning (≈ 1 at the truth)
             add_tracking_noise(

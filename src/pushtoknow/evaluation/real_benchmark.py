@@ -9,7 +9,7 @@ every object of a folder of real pushes, against each object's known parameters.
   clocks that barely overlap or a flipped force sign stop the benchmark with a one-line
   `DatasetError` naming the file; a push without contact (the probe missed) is skipped and
   listed with its reason. Truth: the MIT catalogue's m and I_z, the CoM at the centroid, and
-  μ measured on the object's pure translations (`evaluation.real.friction_reference`, every
+  μ measured on the object's pure translations (`evaluation.real_object.friction_reference`, every
   accepted push), so μ·m's truth is that μ times the catalogue mass.
 - The project's recordings (`datasets.recording` files) and datasets (``shard-*.h5``, one
   object each), read by `identification.recordings.load_recorded_objects`; key
@@ -208,7 +208,7 @@ def _mit_object(
         mit_object_spec,
         mit_sim_config,
     )
-    from pushtoknow.evaluation.real import friction_reference
+    from pushtoknow.evaluation.real_object import friction_reference
 
     sim = mit_sim_config(PHYSICS_RATE_HZ)
     spec = mit_object_spec(shape, 0.5, surface=surface)  # μ unused: shape and rendering only
@@ -467,9 +467,10 @@ def _physics(model, obj: RealObject, seed: int, prior: PriorRanges | None = None
 
 def _learned(model, obj: RealObject, seed: int):
     """(prior, final estimate, extras) of the learned filter on `obj`'s rendered pushes."""
-    from pushtoknow.evaluation.real import real_inference_config
-    from pushtoknow.inference.learned_filter import LearnedFilterEstimator
+    from pushtoknow.evaluation.real_object import real_inference_config
+    from pushtoknow.inference.learned_filter import LearnedFilterEstimator, outside_training
     from pushtoknow.inference.session import infer_recorded
+    from pushtoknow.testbed.shapes import footprint_from_shape
 
     if obj.image_records is None:
         raise DatasetError(obj.key, f"vt-addf needs RGB-D: {obj.image_note}")
@@ -479,14 +480,16 @@ def _learned(model, obj: RealObject, seed: int):
     cfg = real_inference_config(len(recs))
     est = LearnedFilterEstimator(model, cfg, seed)
     res = infer_recorded(model, recs, cfg, seed, None, obj.key, estimator=est)
-    return res.prior, res.estimates[-1], {}
+    footprint = None if obj.shape is None else footprint_from_shape(obj.shape)
+    reasons = outside_training(obj.records, footprint)
+    return res.prior, res.estimates[-1], {"outside_training": list(reasons)} if reasons else {}
 
 
 def _forest_model(forest_data: Path, seed: int, trees: int):
     """The forest fitted on a complete simulated dataset (`DatasetError` naming it otherwise)."""
     from pushtoknow.baselines.random_forest import ForestBaseline, ForestConfig
     from pushtoknow.datasets.shards import dataset_info
-    from pushtoknow.evaluation.real import _training_features
+    from pushtoknow.evaluation.real_object import _training_features
 
     forest_data = Path(forest_data)
     if not forest_data.is_dir():
@@ -510,7 +513,8 @@ class RealBenchmark:
     """The result of `evaluate_real`. objects: {key: {"source", "surface", "files",
     "skipped", "truth", "truth_source", "methods": {name: {param: row}}, "mu_m": {"truth",
     "methods": {name: {mean, std, rel_error}}}, "skipped_methods": {name: reason}, "seconds":
-    {name: s}, "physics": diagnostics, "friction_reference", "notes"}}; surfaces: {surface:
+    {name: s}, "physics": diagnostics, "vt-addf": {"outside_training": [reason]} where the
+    object lies outside what it was trained on, "friction_reference", "notes"}}; surfaces: {surface:
     {"objects": [...], "friction": {method: {mean, std, spread, values}}}}; all SI."""
 
     data_dir: str
@@ -629,6 +633,9 @@ class RealBenchmark:
                     f"{min(chi2):.1f}–{max(chi2):.1f}, {poor} poor fits (m at fixed μ·m and "
                     "I_z then keep the prior)"
                 )
+        for key, o in self.objects.items():
+            for reason in (o.get("vt-addf") or {}).get("outside_training", []):
+                fits.append(f"- {key}: outside what vt-addf was trained on: {reason}")
         if fits:
             lines += ["", *fits]
         if self.notes:

@@ -19,7 +19,7 @@ from pushtoknow.common.params import normalise_params
 from pushtoknow.common.progress import progress_bar
 from pushtoknow.models.checkpoint import TrainedModel
 from pushtoknow.models.physics import PhysicsDynamics
-from pushtoknow.training.data import PushTensors
+from pushtoknow.training.push_tensors import PushTensors
 from pushtoknow.training.supervised import observation, push_context
 
 RIDGE_PARTS: tuple[str, ...] = (

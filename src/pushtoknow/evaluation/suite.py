@@ -57,18 +57,19 @@ import json
 import os
 import platform
 from pathlib import Path
+from typing import Literal
 
 import numpy as np
 from pydantic import Field
 from scipy.stats import norm
 
-from pushtoknow.active.policies import ACTIVE_POLICY_NAMES
+from pushtoknow.active.information_policy import ACTIVE_POLICY_NAMES
 from pushtoknow.baselines.random_forest import ForestBaseline, ForestConfig, features_from_dataset
 from pushtoknow.common.config import Config
 from pushtoknow.common.errors import ConfigError
 from pushtoknow.common.parallel import TaskRunner, Workers
 from pushtoknow.common.params import MIN_SIGMA_POINTS, PARAM_NAMES
-from pushtoknow.common.policies import POLICY_NAMES, PolicyName
+from pushtoknow.common.policy_names import POLICY_NAMES, PolicyName
 from pushtoknow.evaluation.heldout import LEARNED_ESTIMATOR, HeldoutRun, evaluate_heldout
 from pushtoknow.evaluation.metrics import (
     MethodRun,
@@ -80,6 +81,7 @@ from pushtoknow.evaluation.metrics import (
     product_nrmse,
 )
 from pushtoknow.testbed.object_refs import load_object_spec
+from pushtoknow.testbed.sim import PushRecord, stack_records, unstack_records
 
 PRIOR = "prior-mean"
 FOREST = "forest"
@@ -99,7 +101,8 @@ INTERVAL_LEVEL = 0.9  # the interval every estimate reports (docs/DESIGN.md §2)
 # What an inference-run cache holds and how its runs were drawn, part of its key: 2 holds each
 # estimate's interval (lower, upper); 3 runs drew from the named random streams
 # (`common.random`). A run cached under another format is recomputed, never read.
-CACHE_FORMAT = 3
+CACHE_FORMAT = 4
+PUSH_PREFIX = "push_"  # a cached run's pushes: push_<stack_records name>
 
 
 class EvaluationConfig(Config):
@@ -124,6 +127,11 @@ class EvaluationConfig(Config):
         ("uniform",),
         description="policies the physics estimator (the simulator-in-the-loop filter, on the "
         "first model's perception) is evaluated under, rows `physics:<policy>`; () = none",
+    )
+    physics_sets: tuple[Literal["heldout", "novel", "random"], ...] | None = Field(
+        None,
+        description="the sets with `physics:<policy>` rows (None: every set); its replays take "
+        "1–5 min per object on 2 cores",
     )
     random_objects: int = Field(
         0, ge=0, description="objects of the `random` set, random:<random_seed>:0..N-1; 0: none"
@@ -299,8 +307,8 @@ def _save_run(path: Path, key: str, run: HeldoutRun) -> None:
         profiles=np.array(run.profiles),
         **(
             {}
-            if run.push_tracks is None
-            else {"push_actions": run.push_actions, "push_tracks": run.push_tracks}
+            if run.pushes is None
+            else {f"{PUSH_PREFIX}{k}": v for k, v in stack_records(run.pushes).items()}
         ),
         **({} if run.lower is None else {"lower": run.lower, "upper": run.upper}),
     )
@@ -312,6 +320,13 @@ def _load_npz(path: Path, key: str) -> dict[str, np.ndarray] | None:
         return None
     with np.load(path) as f:
         return dict(f) if str(f["key"]) == key else None
+
+
+def _cached_pushes(arrays: dict[str, np.ndarray]) -> list[list[PushRecord]] | None:
+    """The pushes `_save_run` stored (`PUSH_PREFIX` + `stack_records`' names), or None."""
+    n = len(PUSH_PREFIX)
+    stacked = {k[n:]: v for k, v in arrays.items() if k.startswith(PUSH_PREFIX)}
+    return unstack_records(stacked) if stacked else None
 
 
 def _load_run(path: Path, key: str) -> HeldoutRun | None:
@@ -329,8 +344,7 @@ def _load_run(path: Path, key: str) -> HeldoutRun | None:
         features_truth=f["features_truth"],
         features_vision=f["features_vision"],
         profiles=f["profiles"].tolist(),
-        push_actions=f.get("push_actions"),
-        push_tracks=f.get("push_tracks"),
+        pushes=_cached_pushes(f),
         lower=f.get("lower"),  # absent from a cache without intervals: None, never guessed
         upper=f.get("upper"),
     )
@@ -344,18 +358,18 @@ def _inference_run(
     profiles: tuple[str, ...],
     cache: Path,
     progress,
-    need_tracks: bool = False,
+    need_pushes: bool = False,
     workers: Workers = 1,
     estimator: str = LEARNED_ESTIMATOR,
     push_actions: np.ndarray | None = None,
 ) -> HeldoutRun:
     """The model's run under `policy` on `objects`, from `cache` when it holds the same run (and
-    its push tracks, when `need_tracks`: the oracle replays them); `estimator`: the learned
+    its pushes, when `need_pushes`: the oracle replays them); `estimator`: the learned
     filter or the physics one (on the model's perception); `push_actions` (N, K, 5): another
     run's pushes, executed instead of the policy's choices."""
     key = _cache_key(model, policy, objects, cfg, profiles, estimator, push_actions)
     cached = _load_run(cache, key)
-    if cached is not None and not (need_tracks and cached.push_tracks is None):
+    if cached is not None and not (need_pushes and cached.pushes is None):
         return cached
     run = evaluate_heldout(
         model,
@@ -389,7 +403,7 @@ def _oracle_run(
     from pushtoknow.evaluation.identification import oracle_run
 
     h = hashlib.sha256()
-    for a in (base.push_actions, base.push_tracks):
+    for _, a in sorted(stack_records(base.pushes).items()):
         h.update(np.ascontiguousarray(a).tobytes())
     from pushtoknow.evaluation import identification
     from pushtoknow.identification import fit, optimise, replay, residuals
@@ -609,8 +623,9 @@ def run_evaluation(
         methods: dict[str, MethodRun] = {}
         base: HeldoutRun | None = None
         learned: dict[str, HeldoutRun] = {}  # the first model's runs, by policy
+        physics = () if set_name not in (cfg.physics_sets or sets) else cfg.physics_policies
         replays = [  # physics rows on the first model's pushes: their learned run is needed
-            p for p in cfg.physics_policies if f"{PHYSICS}:{p}" not in old and p not in ACTIVE
+            p for p in physics if f"{PHYSICS}:{p}" not in old and p not in ACTIVE
         ]
 
         rows = [
@@ -625,7 +640,7 @@ def run_evaluation(
         ]
         rows += [
             (f"{PHYSICS}:{policy}", models[0], policy, loaded[0].profiles, PHYSICS)
-            for policy in cfg.physics_policies
+            for policy in physics
         ]
         for method, model, policy, profiles, estimator in rows:
             first = estimator == LEARNED_ESTIMATOR and method == f"{names[0]}:{policy}"
@@ -640,8 +655,8 @@ def run_evaluation(
             say(f"{set_name}: {method} on {n} objects ({', '.join(profiles)})")
             adv = progress(f"{set_name} {method}", n) if progress else None
             cache = out / "cache" / set_name / f"{method.replace(':', '_')}.npz"
-            need_tracks = is_base and need_oracle
-            args = (model, policy, objects, cfg, profiles, cache, adv, need_tracks, workers)
+            need_pushes = is_base and need_oracle
+            args = (model, policy, objects, cfg, profiles, cache, adv, need_pushes, workers)
             run = _inference_run(*args, estimator=estimator, push_actions=given)
             if first:
                 learned[policy] = run

@@ -25,8 +25,8 @@ from pushtoknow.filters.gaussian import (
     weighted_covariance,
 )
 from pushtoknow.filters.interfaces import DynamicsModel, ObservationModel, ObservationNoiseModel
-from pushtoknow.filters.shapes import expect_floating, expect_shape
 from pushtoknow.filters.sigma_points import MerweScaledSigmaPoints
+from pushtoknow.filters.tensor_shapes import expect_floating, expect_shape
 
 
 class FilterConfig(Config):

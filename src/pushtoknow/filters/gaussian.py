@@ -16,7 +16,7 @@ from torch.distributions import MultivariateNormal, kl_divergence
 
 from pushtoknow.common.angles import wrap_angle
 from pushtoknow.common.errors import PushToKnowError, ShapeError
-from pushtoknow.filters.shapes import expect_shape
+from pushtoknow.filters.tensor_shapes import expect_shape
 
 
 class CovarianceError(PushToKnowError, ValueError):

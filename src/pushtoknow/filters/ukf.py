@@ -15,8 +15,8 @@ from pushtoknow.filters.gaussian import (
     symmetrize,
     wrap_residual,
 )
-from pushtoknow.filters.shapes import expect_shape
 from pushtoknow.filters.sigma_points import MerweScaledSigmaPoints
+from pushtoknow.filters.tensor_shapes import expect_shape
 
 ObservationFn = Callable[[torch.Tensor], torch.Tensor]
 """Maps sigma points (B, S, N) to predicted observations (B, S, M)."""

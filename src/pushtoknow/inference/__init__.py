@@ -2,7 +2,7 @@
 physics filter) carries the parameter belief push to push; a policy chooses the pushes."""
 
 from pushtoknow.common.estimators import ESTIMATOR_NAMES
-from pushtoknow.common.policies import POLICY_NAMES
+from pushtoknow.common.policy_names import POLICY_NAMES
 from pushtoknow.inference.estimator import (
     Estimator,
     InferenceConfig,

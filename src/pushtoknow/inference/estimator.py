@@ -31,7 +31,7 @@ from pushtoknow.common.config import Config
 from pushtoknow.common.estimate import ParameterEstimate, estimate_from_belief
 from pushtoknow.common.estimators import DEFAULT_ESTIMATOR, EstimatorName
 from pushtoknow.common.params import MIN_SIGMA_POINTS, PARAM_NAMES
-from pushtoknow.common.policies import PolicyName
+from pushtoknow.common.policy_names import PolicyName
 from pushtoknow.testbed.config import SimConfig
 from pushtoknow.testbed.executor import View
 from pushtoknow.testbed.push import PROFILES, ProfileName, Push

@@ -23,10 +23,11 @@ from collections.abc import Sequence
 import numpy as np
 import torch
 
-from pushtoknow.active.policies import ActivePolicy
+from pushtoknow.active.information_policy import ActivePolicy
 from pushtoknow.active.selection import ScoreName
 from pushtoknow.common.errors import DatasetError
 from pushtoknow.common.estimate import com_region
+from pushtoknow.common.params import PARAM_RANGES
 from pushtoknow.inference.estimator import (
     Estimator,
     InferenceConfig,
@@ -42,6 +43,7 @@ from pushtoknow.testbed.config import SimConfig
 from pushtoknow.testbed.executor import View
 from pushtoknow.testbed.objects import COM_MARGIN, MIN_HEIGHT
 from pushtoknow.testbed.push import Push, pad_positions, release_points
+from pushtoknow.testbed.shapes import CATALOGUE_SHAPES, Footprint, footprint_from_shape
 from pushtoknow.testbed.sim import PushRecord
 
 
@@ -197,9 +199,9 @@ class LearnedFilterEstimator(Estimator):
         score: ScoreName,
         horizon_fraction: float,
     ) -> np.ndarray:
-        """N-step score (`active.policies.ActivePolicy`) of each candidate: rollouts of this
-        filter over the candidates' commanded pad paths (`testbed.push.pad_positions`), all
-        candidates in one batch, over N = horizon_fraction of a push's steps."""
+        """N-step score (`active.information_policy.ActivePolicy`) of each candidate: rollouts
+        of this filter over the candidates' commanded pad paths (`testbed.push.pad_positions`),
+        all candidates in one batch, over N = horizon_fraction of a push's steps."""
         sim_config = self.sim_config
         dt = 1.0 / sim_config.tactile.rate_hz
         steps = int(round(sim_config.push.horizon * sim_config.tactile.rate_hz))
@@ -217,3 +219,52 @@ class LearnedFilterEstimator(Estimator):
 
         scores = selector.scores(candidates, mean, cov, builder, self.gen)
         return scores.double().numpy()
+
+
+TRAINING_MARGIN = 0.1  # relative: a reading this far beyond the training range lies outside it
+
+
+def outside_training(records: Sequence[PushRecord], footprint: Footprint | None) -> tuple[str, ...]:
+    """Why an object lies outside what the learned filter was trained on (the testbed
+    catalogue's shapes, `testbed.objects.CATALOGUE_SHAPES`, and parameter ranges,
+    `common.params.PARAM_RANGES`), read off the object and its pushes without its truth; empty
+    where nothing shows it. Each reason is one sentence:
+    - μ·m from the steady force of a constant push (`identification.fit.closed_form_start`; at
+      most μ·m on an off-centre push) above the largest training μ·m, or below half the least;
+    - m or μ read off a release push outside their training ranges;
+    - the footprint (`footprint`: seen or known, object frame) larger or smaller than every
+      training shape (its largest radius from the centroid, its area).
+    Margins: `TRAINING_MARGIN`."""
+    from pushtoknow.identification.fit import closed_form_start
+
+    reasons = []
+    (m0, m1), (f0, f1) = PARAM_RANGES["mass"], PARAM_RANGES["friction"]
+    grow, shrink = 1.0 + TRAINING_MARGIN, 1.0 - TRAINING_MARGIN
+    reading = closed_form_start(records, SimConfig())
+    mu_m = reading["mu_m"]
+    if mu_m is not None and not 0.5 * m0 * f0 * shrink <= mu_m <= m1 * f1 * grow:
+        reasons.append(
+            f"μ·m ≈ {mu_m:.3g} kg from the steady push force, outside the training objects' "
+            f"{m0 * f0:.3g}–{m1 * f1:.3g} kg"
+        )
+    for name, (lo, hi), unit in (("mass", (m0, m1), " kg"), ("friction", (f0, f1), "")):
+        v = reading[name]
+        if v is not None and not lo * shrink <= v <= hi * grow:
+            reasons.append(
+                f"{name} ≈ {v:.3g}{unit} from a release push, outside the training range "
+                f"{lo:g}–{hi:g}{unit}"
+            )
+    if footprint is not None:
+        shapes = [footprint_from_shape(s) for s in CATALOGUE_SHAPES.values()]
+        for what, value, known, unit, scale in (
+            ("largest radius", footprint.max_radius_from((0.0, 0.0)),
+             [s.max_radius_from((0.0, 0.0)) for s in shapes], "cm", 100.0),
+            ("area", footprint.polygon.area, [s.polygon.area for s in shapes], "cm²", 1e4),
+        ):  # fmt: skip
+            lo, hi = min(known), max(known)
+            if not lo * shrink <= value <= hi * grow:
+                reasons.append(
+                    f"its footprint's {what} {value * scale:.3g} {unit} is outside the training "
+                    f"shapes' {lo * scale:.3g}–{hi * scale:.3g} {unit}"
+                )
+    return tuple(reasons)

@@ -56,7 +56,7 @@ from pushtoknow.perception.footprint import object_top, replay_outline
 from pushtoknow.perception.visnet import start_pose, visnet_poses
 from pushtoknow.testbed.config import SimConfig
 from pushtoknow.testbed.executor import View
-from pushtoknow.testbed.objects import COM_MARGIN, MIN_HEIGHT
+from pushtoknow.testbed.objects import COM_MARGIN, MIN_HEIGHT, MIN_WIDTH
 from pushtoknow.testbed.push import Push
 from pushtoknow.testbed.sim import PushRecord
 
@@ -75,7 +75,23 @@ def outline_shape(footprint: np.ndarray) -> tuple[dict, tuple[float, float]]:
     verts = np.asarray(poly.exterior.coords)[:-1] - np.array([c.x, c.y])
     if Polygon(verts).exterior.is_ccw is False:
         verts = verts[::-1]
-    return {"type": "polygon", "vertices": verts.tolist()}, (float(c.x), float(c.y))
+    return {"type": "polygon", "vertices": at_least_min_width(verts).tolist()}, (c.x, c.y)
+
+
+def at_least_min_width(verts: np.ndarray) -> np.ndarray:
+    """Polygon vertices (V, 2) about their centroid, stretched across their narrowest direction
+    (the minimum rotated rectangle's short side) to `testbed.objects.MIN_WIDTH` (and a rounding
+    margin) where narrower: a traced outline loses up to a pixel on each side, and the testbed
+    simulates no object narrower than the camera can see."""
+    rect = np.asarray(Polygon(verts).minimum_rotated_rectangle.exterior.coords)[:3]
+    sides = [rect[1] - rect[0], rect[2] - rect[1]]
+    short = min(sides, key=np.linalg.norm)
+    width = float(np.linalg.norm(short))
+    if width >= MIN_WIDTH:
+        return verts
+    axis = short / width
+    along = verts @ axis
+    return verts + np.outer(along * (1.001 * MIN_WIDTH / width - 1.0), axis)
 
 
 class PhysicsFilterEstimator(Estimator):

@@ -27,9 +27,9 @@ from typing import ClassVar
 
 import numpy as np
 
-from pushtoknow.active.policies import ACTIVE_POLICY_NAMES, ScoreName
+from pushtoknow.active.information_policy import ACTIVE_POLICY_NAMES, ScoreName
 from pushtoknow.common.camera import CameraModel
-from pushtoknow.common.policies import POLICY_NAMES
+from pushtoknow.common.policy_names import POLICY_NAMES
 from pushtoknow.geometry.affordances import mask_contour, sample_push_affordances
 from pushtoknow.testbed.executor import View
 from pushtoknow.testbed.push import Push

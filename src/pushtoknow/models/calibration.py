@@ -13,7 +13,7 @@ physics separates (normalised parameters, `common.params`):
 With y = Rᵀ-coordinates in that basis and w ∈ [0, 1] per direction:
     y = y₀ + w ⊙ (y₁ − y₀),   var = var₁ + (1 − w) ⊙ (var₀ − var₁)   (marginals in the basis),
 and the correlations of the posterior are kept. w = 1 is the filter's posterior, w = 0 the
-push's prior. `training.calibration` chooses w on validation objects' push sequences.
+push's prior. `training.calibrate` chooses w on validation objects' push sequences.
 
 Pushes of one profile share part of their model error (the same model, outline and object),
 so a second push of a profile tells less than the first: the n-th keeps w·g_r(n) of its
@@ -27,7 +27,7 @@ import numpy as np
 import torch
 
 from pushtoknow.common.params import PARAM_NAMES, space_scale
-from pushtoknow.filters.shapes import expect_shape
+from pushtoknow.filters.tensor_shapes import expect_shape
 
 DIRECTIONS: tuple[str, ...] = ("log_mu_m", "m_vs_mu", "com_x", "com_y", "log_inertia")
 

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import torch
 
-from pushtoknow.filters.shapes import expect_shape
+from pushtoknow.filters.tensor_shapes import expect_shape
 
 
 @dataclass(frozen=True)

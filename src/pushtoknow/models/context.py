@@ -16,7 +16,7 @@ import torch
 
 from pushtoknow.common.camera import CameraModel
 from pushtoknow.common.errors import ShapeError
-from pushtoknow.filters.shapes import expect_shape
+from pushtoknow.filters.tensor_shapes import expect_shape
 from pushtoknow.geometry.action_maps import ActionMapConfig, action_map
 
 STEADY_ACCEL = 0.05  # m/s²: pad accelerations below this are a steady push (tracking noise)

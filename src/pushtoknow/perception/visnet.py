@@ -1,6 +1,6 @@
 """VisNet as a render-and-compare pose sensor at run time (docs/DESIGN.md §5, §9): its inputs
 from RGB-D frames and S_0, and the pose measurement. Used by inference and by training (which
-fits the network, `training.visnet`).
+fits the network, `training.fit_visnet`).
 
 VisNet sees the current RGB-D image and S_0 warped to a *reference pose* (at inference the
 filter's predicted mean; in training the true pose perturbed by noise) and outputs the pose of

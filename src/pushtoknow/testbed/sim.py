@@ -8,7 +8,9 @@ force exerted *by the pad on the object* in world axes, averaged over each sampl
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
+from typing import ClassVar
 
 import numpy as np
 
@@ -27,22 +29,27 @@ SLIDE_WINDOW = 0.5  # s after the pad stops that a release push keeps the fine p
 
 @dataclass(eq=False)
 class PushRecord:
-    """Everything recorded for one push. T = horizon · rate + 1 samples at times t_k = k / rate.
+    """One push: the one type of a push for the testbed, the datasets, both estimators and
+    identification (which replays it, `identification.fit.tracks_from_records`). T samples at
+    times `time` (s); a simulated push has T = horizon · rate + 1 at t_k = k / rate.
 
-    pose: (T, 3) object geometric-frame pose (x, y, θ), θ unwrapped (m, m, rad)
-    rgb: (T, H, W, 3) uint8; depth: (T, H, W) float32 metres; s0: (H, W) bool object mask at t_0
-    outline_mask: (kH, kW) bool object mask at t_0 at the camera's outline resolution
-    (k = `CameraConfig.outline_scale`), None where it was not rendered
-    tactile: (T, 3) noisy (F_x, F_y, contact) in N, world frame, force by the pad on the object
-    force_clean: (T, 2) noiseless force; pusher: (T, 2) pad centre (m); time: (T,) s
-    trace: optional physics-rate record {"time", "pose", "velocity", "force"} for tests
+    What was commanded: push (the action); pusher: (T, 2) pad centre (m, world).
+    What was observed: pose: (T, 3) object geometric-frame pose (x, y, θ), θ unwrapped
+    (m, m, rad); tactile: (T, 3) measured (F_x, F_y, contact) in N, world frame, force by the pad
+    on the object; rgb: (T, H, W, 3) uint8; depth: (T, H, W) float32 metres; s0: (H, W) bool
+    object mask at t_0; outline_mask: (kH, kW) bool object mask at t_0 at the camera's outline
+    resolution (k = `CameraConfig.outline_scale`). Images are None where not recorded.
+    What only the simulator knows: force_clean: (T, 2) noiseless force (N; None for a real
+    push); trace: optional physics-rate record {"time", "pose", "velocity", "force"}.
     """
+
+    TRACKS: ClassVar[tuple[str, ...]] = ("time", "pose", "tactile", "force_clean", "pusher")
 
     push: Push
     time: np.ndarray
     pose: np.ndarray
     tactile: np.ndarray
-    force_clean: np.ndarray
+    force_clean: np.ndarray | None
     pusher: np.ndarray
     rgb: np.ndarray | None
     depth: np.ndarray | None
@@ -54,14 +61,48 @@ class PushRecord:
         """Equal when the push and every recorded array are identical (bitwise)."""
         if not isinstance(other, PushRecord) or self.push != other.push:
             return False
-        names = ("time", "pose", "tactile", "force_clean", "pusher", "rgb", "depth", "s0")
-        names += ("outline_mask",)
+        names = (*self.TRACKS, "rgb", "depth", "s0", "outline_mask")
         return all(
             (a is None and b is None) or (a is not None and b is not None and np.array_equal(a, b))
             for a, b in ((getattr(self, n), getattr(other, n)) for n in names)
         )
 
     __hash__ = None
+
+    def tracks_only(self) -> PushRecord:
+        """A copy of the push and its per-sample tracks (`TRACKS`), without images or trace."""
+        tracks = {
+            n: None if getattr(self, n) is None else getattr(self, n).copy() for n in self.TRACKS
+        }
+        return PushRecord(self.push, rgb=None, depth=None, s0=None, **tracks)
+
+
+def stack_records(pushes: Sequence[Sequence[PushRecord]]) -> dict[str, np.ndarray]:
+    """N objects' K pushes of T samples each by field name: "action" (N, K, 5), the pushes'
+    `Push.as_array`, and each of `PushRecord.TRACKS` (N, K, T, ·); force_clean only where every
+    push has one. `unstack_records` inverts it."""
+    records = [r for obj in pushes for r in obj]
+    names = [n for n in PushRecord.TRACKS if all(getattr(r, n) is not None for r in records)]
+    out = {"action": np.array([[r.push.as_array() for r in obj] for obj in pushes])}
+    return out | {n: np.array([[getattr(r, n) for r in obj] for obj in pushes]) for n in names}
+
+
+def unstack_records(arrays: Mapping[str, np.ndarray]) -> list[list[PushRecord]]:
+    """The pushes (without images) `stack_records` packed: N lists of K `PushRecord`s."""
+    tracks = {n: arrays.get(n) for n in PushRecord.TRACKS}
+    return [
+        [
+            PushRecord(
+                Push.from_array(a),
+                rgb=None,
+                depth=None,
+                s0=None,
+                **{n: None if v is None else np.array(v[i, k]) for n, v in tracks.items()},
+            )
+            for k, a in enumerate(actions)
+        ]
+        for i, actions in enumerate(np.asarray(arrays["action"]))
+    ]
 
 
 class PushSimulator:

@@ -29,7 +29,7 @@ from pushtoknow.common.params import MIN_SIGMA_POINTS
 from pushtoknow.filters.base import BeliefFilter
 from pushtoknow.filters.gaussian import safe_cholesky
 from pushtoknow.models.checkpoint import ParamPrior
-from pushtoknow.training.data import PushTensors
+from pushtoknow.training.push_tensors import PushTensors
 from pushtoknow.training.supervised import observation, push_context
 
 

@@ -9,7 +9,7 @@ Stages (docs/DESIGN.md §8), each logged to a CSV file in the run directory:
    NLL of the true parameters after a whole push (`calibration.csv`);
 6. the share of each push's evidence the parameter belief keeps, per direction, on whole
    push sequences of the validation objects (`sequence_calibration.csv`,
-   `training.calibration`).
+   `training.calibrate`).
 Objects are split into training and validation sets by object (`val_fraction`).
 """
 
@@ -45,17 +45,17 @@ from pushtoknow.models.learned import LearnedModelsConfig
 from pushtoknow.perception.visnet import visnet_measure
 from pushtoknow.testbed.config import SimConfig, check_testbed_version
 from pushtoknow.testbed.push import PROFILES
-from pushtoknow.training.calibration import SequenceCalibrationConfig, calibrate_evidence
-from pushtoknow.training.data import (
+from pushtoknow.training.calibrate import SequenceCalibrationConfig, calibrate_evidence
+from pushtoknow.training.end_to_end import EndToEndConfig, evaluate_filter, train_end_to_end
+from pushtoknow.training.fit_visnet import VisNetTrainConfig, perturb, train_visnet
+from pushtoknow.training.push_tensors import (
     PushTensors,
     compute_vision_poses,
     dataset_camera,
     load_frames,
     load_push_tensors,
 )
-from pushtoknow.training.end_to_end import EndToEndConfig, evaluate_filter, train_end_to_end
 from pushtoknow.training.supervised import SupervisedConfig, tactile_losses, train_supervised
-from pushtoknow.training.visnet import VisNetTrainConfig, perturb, train_visnet
 
 
 class CalibrationConfig(Config):

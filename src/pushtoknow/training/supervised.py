@@ -23,7 +23,7 @@ from pydantic import Field
 from pushtoknow.common.config import Config
 from pushtoknow.models.context import PushContext, with_pad_track
 from pushtoknow.models.learned import LearnedModels
-from pushtoknow.training.data import PushTensors
+from pushtoknow.training.push_tensors import PushTensors
 
 
 class SupervisedConfig(Config):

@@ -1,5 +1,5 @@
 """`pushtoknow estimate-real`: the learned filter, the random forest and the prior mean on real
-(MIT Push) pushes of one object, against its known parameters (`pushtoknow.evaluation.real`).
+(MIT Push) pushes of one object, against its known parameters (`pushtoknow.evaluation.real_object`).
 
 Registered on the main app by `register(app)` (called at the end of `pushtoknow.cli.main`).
 """
@@ -60,9 +60,9 @@ def estimate_real(
     random forest, physics-based identification, prior mean) and compare with its known mass,
     I_z, CoM and a friction measured on its pure translations. Raw MIT Push files are
     converted first, time-rescaled to the model's training speed unless --no-rescale."""
-    from pushtoknow.evaluation.real import estimate_real_object
+    from pushtoknow.evaluation.real_object import estimate_real_object
     from pushtoknow.pretrained import resolve_model_path
-    from pushtoknow.reporting.real import error_rows, markdown_table
+    from pushtoknow.reporting.real_report import error_rows, markdown_table
 
     try:
         report = estimate_real_object(
@@ -96,7 +96,7 @@ def estimate_real(
 
 
 def _print_report(report, error_rows, model_ref: str) -> None:
-    from pushtoknow.reporting.real import table_rows
+    from pushtoknow.reporting.real_report import table_rows
 
     header, rows = table_rows(report)
     t = Table(

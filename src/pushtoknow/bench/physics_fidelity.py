@@ -58,7 +58,7 @@ def run_physics_bench(seed: int = 0, quick: bool = False) -> PhysicsReport:
             readings.append(
                 {"mass": m, "friction": f, "read_mass": r.mass, "read_friction": r.friction}
             )
-    from pushtoknow.bench.sim import run_sim_bench
+    from pushtoknow.bench.throughput import run_sim_bench
 
     rtf = run_sim_bench(pushes=3 if quick else 6, seed=seed).realtime_factor
     return PhysicsReport(

@@ -9,7 +9,7 @@ import sys
 
 import pytest
 
-from pushtoknow.bench.estimator import Z90, ObjectRow, default_objects, summarise
+from pushtoknow.bench.estimator_accuracy import Z90, ObjectRow, default_objects, summarise
 from pushtoknow.common.params import PARAM_NAMES
 
 EXE = [sys.executable, "-m", "pushtoknow.cli"]

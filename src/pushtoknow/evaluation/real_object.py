@@ -84,7 +84,8 @@ from pushtoknow.datasets.shards import (
     warn_if_incomplete,
 )
 from pushtoknow.evaluation.metrics import param_ranges
-from pushtoknow.reporting.real import RealIdentification, RealReport
+from pushtoknow.inference.learned_filter import outside_training
+from pushtoknow.reporting.real_report import RealIdentification, RealReport
 
 if TYPE_CHECKING:
     from pushtoknow.common.camera import CameraModel
@@ -256,7 +257,7 @@ def prepare_real_data(
         "source": str(data_dir),
         "dir": str(import_dir),
         "as_speed_m_per_s": as_speed,
-        "files": res["files"],
+        "files": res.files,
     }
 
 
@@ -752,6 +753,13 @@ def _notes(truth, pushes, model, real: RealPushes, cautions: list[str]) -> list[
     notes.append(
         "docs/PHYSICS.md: quasi-static pushing reveals μ·m (force) and the CoM (motion), not m and "
         "μ separately, and I_z barely: compare μ·m rather than mass or friction alone"
+    )
+    reasons = outside_training(real.records, real.spec.footprint)
+    notes.append(
+        "the filter: this object lies outside what it was trained on (read off its pushes and "
+        f"outline): {'; '.join(reasons)}; its estimates there are extrapolations"
+        if reasons
+        else "the filter: nothing in the pushes or the outline lies outside what it was trained on"
     )
     rate = rate_note(real, model)
     return notes + cautions + ([] if rate is None else [rate])

@@ -1,5 +1,6 @@
-"""Estimates on real pushes (`pushtoknow.evaluation.real`, `pushtoknow estimate-real`): the three
-MIT Push sample files of rect1, the tiny trained model and the tiny simulated dataset."""
+"""Estimates on real pushes (`pushtoknow.evaluation.real_object`, `pushtoknow estimate-real`):
+the three MIT Push sample files of rect1, the tiny trained model and the tiny simulated
+dataset."""
 
 from __future__ import annotations
 
@@ -16,13 +17,13 @@ from pushtoknow.common.errors import DatasetError
 from pushtoknow.common.params import GRAVITY, PARAM_NAMES, PARAM_RANGES
 from pushtoknow.datasets.mit_import import import_mit_dataset
 from pushtoknow.datasets.mit_push import mit_object
-from pushtoknow.evaluation.real import (
+from pushtoknow.evaluation.real_object import (
     REPORT_KEYS,
     estimate_real_object,
     friction_reference,
     load_real_object,
 )
-from pushtoknow.reporting.real import RealReport, markdown_table
+from pushtoknow.reporting.real_report import RealReport, markdown_table
 from pushtoknow.testbed.executor import View
 from pushtoknow.testbed.push import Push
 from pushtoknow.testbed.sim import PushRecord
@@ -215,7 +216,7 @@ def test_report_truth_and_errors(report, forest_dir):
 def test_filter_runs_the_pushes_in_order_carrying_the_posterior(report, real_dir, run_dir):
     """The report's filter estimates are one `LearnedFilterEstimator` run over the pushes in file
     order, each starting at its recorded pose, the posterior carried (not reset per push)."""
-    from pushtoknow.evaluation.real import real_inference_config
+    from pushtoknow.evaluation.real_object import real_inference_config
     from pushtoknow.inference.learned_filter import LearnedFilterEstimator
     from pushtoknow.models.checkpoint import load_checkpoint
 
@@ -389,7 +390,7 @@ def test_identify_row_replays_the_recorded_clock_and_reports_every_push(
 def test_identify_refuses_pushes_on_different_clocks(real_dir_rescaled, tmp_path):
     from dataclasses import replace
 
-    from pushtoknow.evaluation.real import identify_real, load_real_object
+    from pushtoknow.evaluation.real_object import identify_real, load_real_object
 
     real = load_real_object(real_dir_rescaled)
     attrs = [*real.attrs]

@@ -110,6 +110,12 @@ def load_push_tensors(root: Path, max_objects: int | None = None) -> PushTensors
                     cols["mask0"].append(s0[None].astype(np.float32))
                     cols["pose"].append(pose)
                     cols["tactile"].append(p["tactile"][()])
+                    if "force_clean" not in p:
+                        raise DatasetError(
+                            s,
+                            f"object {okey} push {pk}: no force_clean (a real push): "
+                            "training needs simulated pushes",
+                        )
                     cols["force_clean"].append(p["force_clean"][()])
                     cols["pusher"].append(p["pusher"][()])
                     cols["action"].append(np.asarray(p.attrs["action"]))

@@ -34,7 +34,7 @@ from pydantic import Field, field_validator, model_validator
 
 from pushtoknow.common.config import Config
 from pushtoknow.common.params import MIN_SIGMA_POINTS
-from pushtoknow.filters.shapes import expect_shape
+from pushtoknow.filters.tensor_shapes import expect_shape
 from pushtoknow.models.calibration import (
     DIRECTIONS,
     check_correlations,
@@ -44,8 +44,8 @@ from pushtoknow.models.calibration import (
 )
 from pushtoknow.models.checkpoint import InferenceSettings, TrainedModel
 from pushtoknow.testbed.push import PROFILES
-from pushtoknow.training.data import PushTensors
 from pushtoknow.training.end_to_end import run_window
+from pushtoknow.training.push_tensors import PushTensors
 
 
 class SequenceCalibrationConfig(Config):

@@ -10,13 +10,13 @@ from pushtoknow.datasets.generate import GenerationConfig, generate_dataset
 from pushtoknow.perception.footprint import FOOTPRINT_VERTICES, footprint_from_mask
 from pushtoknow.perception.visnet import visnet_inputs
 from pushtoknow.testbed.config import PushConfig, SimConfig
-from pushtoknow.training.data import dataset_camera, load_frames, load_push_tensors
-from pushtoknow.training.visnet import (
+from pushtoknow.training.fit_visnet import (
     VisNetTrainConfig,
     evaluate_visnet,
     perturb,
     train_visnet,
 )
+from pushtoknow.training.push_tensors import dataset_camera, load_frames, load_push_tensors
 
 
 @pytest.fixture(scope="module")

@@ -1,4 +1,4 @@
-"""The real-data report (`RealReport`, made by `evaluation.real.estimate_real_object`, with
+"""The real-data report (`RealReport`, made by `evaluation.real_object.estimate_real_object`, with
 its `RealIdentification`) and its tables: the estimates after each push beside the truth, the
 normalised errors, and the notes, as markdown."""
 
@@ -15,7 +15,7 @@ from pushtoknow.reporting.units import labelled
 
 @dataclass(frozen=True)
 class RealIdentification:
-    """`evaluation.real.identify_real`: the physics-based fits of the first k real pushes,
+    """`evaluation.real_object.identify_real`: the physics-based fits of the first k real pushes,
     k = 1…K, SI; `to_json()` gives its entry of the `estimate-real` JSON."""
 
     # after each k: {param: {mean, std, interval}, "mu_m": {mean, std, interval},
@@ -33,7 +33,7 @@ class RealIdentification:
 
 @dataclass(frozen=True)
 class RealReport:
-    """What `evaluation.real.estimate_real_object` found on one real object, SI throughout;
+    """What `evaluation.real_object.estimate_real_object` found on one real object, SI throughout;
     `to_json()` gives the JSON `estimate-real` prints (the fields in order). An error is
     |estimate − truth| / (catalogue max − min) per parameter (None without a truth), with
     "overall" the mean over the parameters with a truth; a μ·m error is normalised by the
@@ -54,7 +54,7 @@ class RealReport:
     pushes: list[dict]
     truth: dict[str, float | None]  # {param: value}; friction None when no push qualifies
     truth_source: dict[str, str]  # {param: where its truth comes from}
-    friction_reference: dict  # `evaluation.real.friction_reference`'s
+    friction_reference: dict  # `evaluation.real_object.friction_reference`'s
     # {"variant", "sigma_points", "prior": {param: {mean, std}}, "per_push": [the same after
     # each push]}
     filter: dict
