@@ -252,9 +252,19 @@ def test_physics_rows_beside_the_learned_ones(physics_eval):
         cached = ("vt-addf_uniform", "physics_uniform")
         runs = {m: np.load(out / "cache" / set_name / f"{m}.npz") for m in cached}
         np.testing.assert_array_equal(
-            runs["physics_uniform"]["push_action"], runs["vt-addf_uniform"]["push_action"]
+            runs["physics_uniform"]["pushes_action"], runs["vt-addf_uniform"]["pushes_action"]
         )  # the pushes' fields by name (`testbed.sim.stack_records`, `suite.PUSH_PREFIX`)
         assert "replayed" in results["sets"][set_name]["notes"]["physics:uniform"]
+
+
+def test_physics_sets_must_be_sets_the_evaluation_makes(tmp_path):
+    from pushtoknow.common.errors import ConfigError
+    from pushtoknow.evaluation.suite import run_evaluation
+
+    cfg = EvaluationConfig.model_validate(TINY_EVAL | {"physics_sets": ["novel"]})
+    with pytest.raises(ConfigError, match=r"physics_sets: \['novel'\]: sets this evaluation"):
+        run_evaluation(None, [tmp_path / "model.pt"], cfg, tmp_path / "out")
+    assert not (tmp_path / "out").exists()  # refused before any work
 
 
 def test_the_cache_key_names_the_estimator(tmp_path):

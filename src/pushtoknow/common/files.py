@@ -51,9 +51,9 @@ def atomic_write_set(files: Mapping[Path, Content]) -> list[Path]:
     try:
         for path, content in files.items():
             path = Path(path)
-            path.parent.mkdir(parents=True, exist_ok=True)
             tmp = tmp_path(path)
             staged.append((tmp, path))
+            path.parent.mkdir(parents=True, exist_ok=True)
             if isinstance(content, bytes):
                 tmp.write_bytes(content)
             elif isinstance(content, str):

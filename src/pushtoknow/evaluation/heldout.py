@@ -17,7 +17,7 @@ from pushtoknow.common.params import product_moments
 from pushtoknow.evaluation.metrics import coverage, nrmse, product_nrmse
 from pushtoknow.inference.policies import PushDecision, PushPolicy
 from pushtoknow.testbed.push import Push
-from pushtoknow.testbed.sim import PushRecord, stack_records
+from pushtoknow.testbed.sim import PushRecord
 
 LEARNED_ESTIMATOR = "vt-addf"  # the estimator these runs use unless told (the paper's filter)
 
@@ -47,7 +47,9 @@ class HeldoutRun:
     @property
     def push_actions(self) -> np.ndarray | None:
         """(N, K, 5) `Push.as_array` of each executed push (None without `pushes`)."""
-        return None if self.pushes is None else stack_records(self.pushes)["action"]
+        if self.pushes is None:
+            return None
+        return np.array([[r.push.as_array() for r in obj] for obj in self.pushes])
 
 
 class ReplayPolicy(PushPolicy):

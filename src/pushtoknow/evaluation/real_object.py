@@ -84,7 +84,6 @@ from pushtoknow.datasets.shards import (
     warn_if_incomplete,
 )
 from pushtoknow.evaluation.metrics import param_ranges
-from pushtoknow.inference.learned_filter import outside_training
 from pushtoknow.reporting.real_report import RealIdentification, RealReport
 
 if TYPE_CHECKING:
@@ -754,7 +753,9 @@ def _notes(truth, pushes, model, real: RealPushes, cautions: list[str]) -> list[
         "docs/PHYSICS.md: quasi-static pushing reveals μ·m (force) and the CoM (motion), not m and "
         "μ separately, and I_z barely: compare μ·m rather than mass or friction alone"
     )
-    reasons = outside_training(real.records, real.spec.footprint)
+    from pushtoknow.inference.learned_filter import outside_training  # torch: the filter's
+
+    reasons = outside_training(real.records, real.spec.footprint, real.sim_config)
     notes.append(
         "the filter: this object lies outside what it was trained on (read off its pushes and "
         f"outline): {'; '.join(reasons)}; its estimates there are extrapolations"

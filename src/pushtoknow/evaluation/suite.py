@@ -100,9 +100,10 @@ ACTIVE = tuple(ACTIVE_POLICY_NAMES.values())  # they choose by the estimator's o
 INTERVAL_LEVEL = 0.9  # the interval every estimate reports (docs/DESIGN.md §2)
 # What an inference-run cache holds and how its runs were drawn, part of its key: 2 holds each
 # estimate's interval (lower, upper); 3 runs drew from the named random streams
-# (`common.random`). A run cached under another format is recomputed, never read.
+# (`common.random`); 4 holds the pushes by field name (`PUSH_PREFIX`). A run cached under
+# another format is recomputed, never read.
 CACHE_FORMAT = 4
-PUSH_PREFIX = "push_"  # a cached run's pushes: push_<stack_records name>
+PUSH_PREFIX = "pushes_"  # a cached run's pushes: pushes_<stack_records name>
 
 
 class EvaluationConfig(Config):
@@ -574,6 +575,9 @@ def run_evaluation(
         if unknown or (field == "policies" and not policies):
             raise ValueError(f"unknown {field} {unknown}; choose from {list(POLICY_NAMES)}")
     kept = _kept_results(keep, cfg)  # before any work
+    made = {"heldout": True, "novel": cfg.novel_objects > 0, RANDOM_SET: cfg.random_objects > 0}
+    if missing := sorted(set(cfg.physics_sets or ()) - {k for k, v in made.items() if v}):
+        raise ConfigError("physics_sets", f"{missing}: sets this evaluation does not make")
     say = echo or (lambda _: None)
     sets = {"heldout": heldout_object_refs(cfg.heldout_objects)}
     if cfg.novel_objects:
@@ -623,7 +627,8 @@ def run_evaluation(
         methods: dict[str, MethodRun] = {}
         base: HeldoutRun | None = None
         learned: dict[str, HeldoutRun] = {}  # the first model's runs, by policy
-        physics = () if set_name not in (cfg.physics_sets or sets) else cfg.physics_policies
+        wanted = sets if cfg.physics_sets is None else cfg.physics_sets
+        physics = cfg.physics_policies if set_name in wanted else ()
         replays = [  # physics rows on the first model's pushes: their learned run is needed
             p for p in physics if f"{PHYSICS}:{p}" not in old and p not in ACTIVE
         ]

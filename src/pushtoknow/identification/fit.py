@@ -250,8 +250,8 @@ def closed_form_start(records: Sequence[PushRecord], sim_config: SimConfig) -> d
         elif r.push.profile == "release":
             try:
                 reading = read_release(r, sim_config)
-            except (ValueError, ZeroDivisionError, FloatingPointError):
-                continue
+            except (ValueError, ZeroDivisionError, FloatingPointError, IndexError):
+                continue  # IndexError: a push too short to hold its braking phase
             if np.isfinite(reading.friction) and 0.05 < reading.friction < 2.0:
                 frictions.append(reading.friction)
                 if np.isfinite(reading.mass) and 0.02 < reading.mass < 10.0:

@@ -224,7 +224,9 @@ class LearnedFilterEstimator(Estimator):
 TRAINING_MARGIN = 0.1  # relative: a reading this far beyond the training range lies outside it
 
 
-def outside_training(records: Sequence[PushRecord], footprint: Footprint | None) -> tuple[str, ...]:
+def outside_training(
+    records: Sequence[PushRecord], footprint: Footprint | None, sim_config: SimConfig
+) -> tuple[str, ...]:
     """Why an object lies outside what the learned filter was trained on (the testbed
     catalogue's shapes, `testbed.objects.CATALOGUE_SHAPES`, and parameter ranges,
     `common.params.PARAM_RANGES`), read off the object and its pushes without its truth; empty
@@ -234,18 +236,20 @@ def outside_training(records: Sequence[PushRecord], footprint: Footprint | None)
     - m or μ read off a release push outside their training ranges;
     - the footprint (`footprint`: seen or known, object frame) larger or smaller than every
       training shape (its largest radius from the centroid, its area).
+    sim_config: the settings the pushes were made with (their release profile).
     Margins: `TRAINING_MARGIN`."""
     from pushtoknow.identification.fit import closed_form_start
 
     reasons = []
     (m0, m1), (f0, f1) = PARAM_RANGES["mass"], PARAM_RANGES["friction"]
     grow, shrink = 1.0 + TRAINING_MARGIN, 1.0 - TRAINING_MARGIN
-    reading = closed_form_start(records, SimConfig())
+    reading = closed_form_start(records, sim_config)
     mu_m = reading["mu_m"]
     if mu_m is not None and not 0.5 * m0 * f0 * shrink <= mu_m <= m1 * f1 * grow:
         reasons.append(
-            f"μ·m ≈ {mu_m:.3g} kg from the steady push force, outside the training objects' "
-            f"{m0 * f0:.3g}–{m1 * f1:.3g} kg"
+            f"μ·m ≈ {mu_m:.3g} kg from the steady push force, outside the "
+            f"{0.5 * m0 * f0:.3g}–{m1 * f1:.3g} kg the training objects' pushes read (half "
+            f"their least μ·m, {m0 * f0:.3g} kg, on an off-centre push, to their largest)"
         )
     for name, (lo, hi), unit in (("mass", (m0, m1), " kg"), ("friction", (f0, f1), "")):
         v = reading[name]

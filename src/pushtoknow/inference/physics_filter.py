@@ -56,8 +56,9 @@ from pushtoknow.perception.footprint import object_top, replay_outline
 from pushtoknow.perception.visnet import start_pose, visnet_poses
 from pushtoknow.testbed.config import SimConfig
 from pushtoknow.testbed.executor import View
-from pushtoknow.testbed.objects import COM_MARGIN, MIN_HEIGHT, MIN_WIDTH
+from pushtoknow.testbed.objects import COM_MARGIN, MIN_HEIGHT, MIN_WIDTH, narrowest_side
 from pushtoknow.testbed.push import Push
+from pushtoknow.testbed.shapes import polygon_footprint
 from pushtoknow.testbed.sim import PushRecord
 
 log = logging.getLogger(__name__)
@@ -78,20 +79,23 @@ def outline_shape(footprint: np.ndarray) -> tuple[dict, tuple[float, float]]:
     return {"type": "polygon", "vertices": at_least_min_width(verts).tolist()}, (c.x, c.y)
 
 
+WIDEN_ROUNDS = 8  # stretches `at_least_min_width` tries
+
+
 def at_least_min_width(verts: np.ndarray) -> np.ndarray:
     """Polygon vertices (V, 2) about their centroid, stretched across their narrowest direction
-    (the minimum rotated rectangle's short side) to `testbed.objects.MIN_WIDTH` (and a rounding
-    margin) where narrower: a traced outline loses up to a pixel on each side, and the testbed
-    simulates no object narrower than the camera can see."""
-    rect = np.asarray(Polygon(verts).minimum_rotated_rectangle.exterior.coords)[:3]
-    sides = [rect[1] - rect[0], rect[2] - rect[1]]
-    short = min(sides, key=np.linalg.norm)
-    width = float(np.linalg.norm(short))
-    if width >= MIN_WIDTH:
-        return verts
-    axis = short / width
-    along = verts @ axis
-    return verts + np.outer(along * (1.001 * MIN_WIDTH / width - 1.0), axis)
+    (the minimum rotated rectangle's short side) to 1% above `testbed.objects.MIN_WIDTH` where
+    narrower, again until the testbed's width check passes (a stretch can tilt the rectangle):
+    a traced outline loses up to a pixel on each side, and the testbed simulates no object
+    narrower than the camera can see."""
+    for _ in range(WIDEN_ROUNDS):  # a stretch can tilt the rectangle: stretch again
+        short = narrowest_side(polygon_footprint(verts))  # as `validate_footprint` measures
+        width = float(np.linalg.norm(short))
+        if width >= MIN_WIDTH:
+            return verts
+        axis = short / width
+        verts = verts + np.outer((verts @ axis) * (1.01 * MIN_WIDTH / width - 1.0), axis)
+    return verts
 
 
 class PhysicsFilterEstimator(Estimator):

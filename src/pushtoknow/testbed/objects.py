@@ -183,6 +183,13 @@ def recentred_legacy_shape(shape):
     return shape
 
 
+def narrowest_side(fp: Footprint) -> np.ndarray:
+    """The short side (2,) (m, object frame) of the footprint's minimum-area rotated rectangle:
+    its length is the width `validate_footprint` checks."""
+    xy = np.asarray(fp.polygon.minimum_rotated_rectangle.exterior.coords)[:3]
+    return min((xy[1] - xy[0], xy[2] - xy[1]), key=lambda side: float(np.linalg.norm(side)))
+
+
 def validate_footprint(fp: Footprint) -> None:
     """Refuse footprints the testbed cannot simulate faithfully (size bounds, see the module
     docstring), naming the bound."""
@@ -194,9 +201,7 @@ def validate_footprint(fp: Footprint) -> None:
             f"too large: beyond {MAX_RADIUS} m from its centroid the object leaves the camera's "
             f"view (±{_VIEW_HALF_WIDTH:.2f} m) while pushed",
         )
-    rect = fp.polygon.minimum_rotated_rectangle
-    xy = np.asarray(rect.exterior.coords)[:3]
-    width = float(min(np.linalg.norm(xy[1] - xy[0]), np.linalg.norm(xy[2] - xy[1])))
+    width = float(np.linalg.norm(narrowest_side(fp)))
     if width < MIN_WIDTH:
         raise ObjectSpecError(
             "shape",

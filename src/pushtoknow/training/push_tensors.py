@@ -26,7 +26,7 @@ from pushtoknow.testbed.push import Push, release_point
 class PushTensors:
     """N pushes of T samples (float32 unless said).
 
-    mask0 (N, 1, H, W) · pose (N, T, 3) true · tactile (N, T, 3) · force_clean (N, T, 2)
+    mask0 (N, 1, H, W) · pose (N, T, 3) true · tactile (N, T, 3)
     pusher (N, T, 2) · action (N, 5) · params (N, 5) SI (float64) · params_norm (N, 5)
     footprint (N, V, 2) seen before the push
     release (N, 3) each push's `testbed.push.release_point`
@@ -38,7 +38,6 @@ class PushTensors:
     mask0: torch.Tensor
     pose: torch.Tensor
     tactile: torch.Tensor
-    force_clean: torch.Tensor
     pusher: torch.Tensor
     action: torch.Tensor
     params: torch.Tensor
@@ -83,7 +82,6 @@ def load_push_tensors(root: Path, max_objects: int | None = None) -> PushTensors
             "mask0",
             "pose",
             "tactile",
-            "force_clean",
             "pusher",
             "action",
             "params",
@@ -110,13 +108,6 @@ def load_push_tensors(root: Path, max_objects: int | None = None) -> PushTensors
                     cols["mask0"].append(s0[None].astype(np.float32))
                     cols["pose"].append(pose)
                     cols["tactile"].append(p["tactile"][()])
-                    if "force_clean" not in p:
-                        raise DatasetError(
-                            s,
-                            f"object {okey} push {pk}: no force_clean (a real push): "
-                            "training needs simulated pushes",
-                        )
-                    cols["force_clean"].append(p["force_clean"][()])
                     cols["pusher"].append(p["pusher"][()])
                     cols["action"].append(np.asarray(p.attrs["action"]))
                     cols["params"].append(params)
@@ -130,7 +121,7 @@ def load_push_tensors(root: Path, max_objects: int | None = None) -> PushTensors
         raise DatasetError(root, f"pushes of different lengths {sorted(lengths)}")
     f32 = {
         k: torch.as_tensor(np.stack(cols[k]), dtype=torch.float32)
-        for k in ("mask0", "pose", "tactile", "force_clean", "pusher", "action", "footprint")
+        for k in ("mask0", "pose", "tactile", "pusher", "action", "footprint")
     }
     params = torch.as_tensor(np.stack(cols["params"]), dtype=torch.float64)
     release = [release_point(Push.from_array(a), sim_config.push) for a in cols["action"]]
