@@ -575,15 +575,14 @@ def run_evaluation(
         if unknown or (field == "policies" and not policies):
             raise ValueError(f"unknown {field} {unknown}; choose from {list(POLICY_NAMES)}")
     kept = _kept_results(keep, cfg)  # before any work
-    made = {"heldout": True, "novel": cfg.novel_objects > 0, RANDOM_SET: cfg.random_objects > 0}
-    if missing := sorted(set(cfg.physics_sets or ()) - {k for k, v in made.items() if v}):
-        raise ConfigError("physics_sets", f"{missing}: sets this evaluation does not make")
     say = echo or (lambda _: None)
     sets = {"heldout": heldout_object_refs(cfg.heldout_objects)}
     if cfg.novel_objects:
         sets["novel"] = novel_object_refs(cfg.novel_objects, cfg.seed)
     if cfg.random_objects:
         sets[RANDOM_SET] = random_object_refs(cfg.random_objects, cfg.random_seed)
+    if missing := sorted(set(cfg.physics_sets or ()) - set(sets)):
+        raise ConfigError("physics_sets", f"{missing}: sets this evaluation does not make")
     specs = {name: [load_object_spec(o) for o in objects] for name, objects in sets.items()}
     kept_sets = {} if kept is None else kept["sets"]
     for set_name, objects in sets.items():
