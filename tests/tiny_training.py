@@ -11,7 +11,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from pushtoknow.datasets.generate import GenerationConfig, generate_dataset
-from pushtoknow.testbed.config import PushConfig, SimConfig
+from pushtoknow.testbed.sim_config import PushConfig, SimConfig
 from pushtoknow.training.pipeline import TrainConfig, train_model
 
 HORIZON_S = 2.0

@@ -13,7 +13,7 @@ from pushtoknow.bench.active import (
     run_active_bench,
 )
 from pushtoknow.common.camera import CameraModel
-from pushtoknow.testbed.config import PadConfig, PushConfig
+from pushtoknow.testbed.sim_config import PadConfig, PushConfig
 
 
 def test_run_active_bench_reports_both_scores():

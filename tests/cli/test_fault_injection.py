@@ -195,7 +195,7 @@ def test_a_full_disk_ends_in_a_message_and_loses_nothing(tmp_path, monkeypatch, 
 
 def test_training_on_a_single_object_is_refused_before_any_work(tmp_path, monkeypatch, capsys):
     from pushtoknow.datasets.generate import GenerationConfig, generate_dataset
-    from pushtoknow.testbed.config import PushConfig, SimConfig
+    from pushtoknow.testbed.sim_config import PushConfig, SimConfig
 
     cfg = GenerationConfig(objects=1, pushes=1, seed=0, sim=SimConfig(push=PushConfig(horizon=1.0)))
     generate_dataset(tmp_path / "one", cfg, progress=False)

@@ -99,7 +99,7 @@ def test_unreachable_or_malformed_addresses_are_one_line_errors():
 @pytest.mark.slow
 def test_simulate_on_ray_writes_the_local_runs_arrays(ray_runner, tmp_path):
     from pushtoknow.datasets.generate import GenerationConfig, generate_dataset
-    from pushtoknow.testbed.config import PushConfig, SimConfig
+    from pushtoknow.testbed.sim_config import PushConfig, SimConfig
 
     cfg = GenerationConfig(
         objects=3,
@@ -122,9 +122,9 @@ def test_identification_rollouts_on_ray_equal_the_local_ones(ray_runner):
     from pushtoknow.identification.fit import tracks_from_records
     from pushtoknow.identification.replay import ReplayScene, RolloutPool
     from pushtoknow.identification.synthetic import simulate_pushes
-    from pushtoknow.testbed.config import SimConfig
     from pushtoknow.testbed.object_refs import load_object_spec
     from pushtoknow.testbed.objects import resolve_shape
+    from pushtoknow.testbed.sim_config import SimConfig
 
     sim = SimConfig(render=False).model_copy(
         update={"push": SimConfig().push.model_copy(update={"horizon": 2.0})}
@@ -158,6 +158,6 @@ def test_evaluate_on_ray_gives_the_local_numbers(ray_runner, tmp_path_factory, t
     cfg = EvaluationConfig.from_yaml(ci).model_copy(update=update)
     local = run_evaluation(data, [run_dir], cfg, tmp_path / "local")
     on_ray = run_evaluation(data, [run_dir], cfg, tmp_path / "ray", runner=ray_runner)
-    a, b = local["sets"]["heldout"]["methods"], on_ray["sets"]["heldout"]["methods"]
+    a, b = local.methods, on_ray.methods
     diff = {(m, k) for m in a for k in a[m] if a[m][k] != b[m][k] and k != "seconds_per_object"}
     assert not diff, diff  # every number but the wall time

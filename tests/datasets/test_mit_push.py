@@ -311,10 +311,10 @@ def test_reader_matches_the_simulator_tactile_timing(tmp_path):
     simulator's ( , ]); 0.1 s of zero force before the push stands for the pad at rest.
     """
     from pushtoknow.common.params import ObjectParams
-    from pushtoknow.testbed.config import PushConfig, SimConfig
     from pushtoknow.testbed.objects import ObjectSpec
     from pushtoknow.testbed.push import Push
     from pushtoknow.testbed.sim import PushSimulator
+    from pushtoknow.testbed.sim_config import PushConfig, SimConfig
 
     obj = mit_object("rect1")
     spec = ObjectSpec(shape="rect1", params=ObjectParams(obj.mass, 0.3, 0.0, 0.0, obj.inertia))

@@ -280,8 +280,8 @@ def test_resampling_a_jittered_clock_preserves_a_linear_motion(seed, jitter, vel
 def test_identify_from_a_recording_gives_the_shards_result(tiny, tmp_path):
     """A simulated object written as a recording is read back with the shard's settings and
     pushes, and identified to the very same estimate."""
-    from pushtoknow.identification.config import IdentifyConfig
     from pushtoknow.identification.fit import identify
+    from pushtoknow.identification.identify_config import IdentifyConfig
     from pushtoknow.identification.recordings import load_recorded_objects, replay_scene
 
     ep = _episode(tiny)

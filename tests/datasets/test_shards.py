@@ -10,7 +10,7 @@ from pushtoknow.common.errors import DatasetError, ObjectSpecError
 from pushtoknow.datasets.generate import GenerationConfig, generate_dataset, select_objects
 from pushtoknow.datasets.shards import dataset_info, open_shard, read_shard, shard_path
 from pushtoknow.datasets.torch_dataset import PushDataset
-from pushtoknow.testbed.config import PushConfig, SimConfig
+from pushtoknow.testbed.sim_config import PushConfig, SimConfig
 
 # Short pushes keep the tests fast; physics is tested elsewhere.
 FAST = SimConfig(push=PushConfig(horizon=2.0))

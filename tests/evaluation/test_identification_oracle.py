@@ -7,9 +7,9 @@ from pushtoknow.evaluation.heldout import HeldoutRun
 from pushtoknow.evaluation.identification import oracle_run, push_profiles
 from pushtoknow.evaluation.suite import summarise_method
 from pushtoknow.identification.synthetic import simulate_pushes
-from pushtoknow.testbed.config import SimConfig
 from pushtoknow.testbed.objects import ObjectSpec
 from pushtoknow.testbed.sim import stack_records, unstack_records
+from pushtoknow.testbed.sim_config import SimConfig
 
 SHORT = SimConfig(render=False).model_copy(
     update={"push": SimConfig().push.model_copy(update={"horizon": 2.0})}

@@ -360,7 +360,7 @@ def test_identify_row_replays_the_recorded_clock_and_reports_every_push(
     the recorded 50 Hz clock along the recorded pusher tracks, estimates the noise from the
     misfit (real data have none), and reports after 1…3 pushes, with errors and μ·m beside
     the filter's; intervals contain their means, and the tables gain its column and rows."""
-    from pushtoknow.identification.config import IdentifyConfig
+    from pushtoknow.identification.identify_config import IdentifyConfig
 
     r = estimate_real_object(
         real_dir_rescaled, run_dir, forest_dir, seed=0, forest_trees=TREES,

@@ -239,9 +239,9 @@ def physics_eval(tmp_path_factory):
 def test_physics_rows_beside_the_learned_ones(physics_eval):
     results, _, out = physics_eval
     assert EvaluationConfig().physics_policies == ("uniform",)
-    assert results["primary"] == "vt-addf:uniform"
+    assert results.primary == "vt-addf:uniform"
     for set_name in ("heldout", "random"):
-        methods = results["sets"][set_name]["methods"]
+        methods = results.sets[set_name]["methods"]
         assert list(methods)[:2] == ["vt-addf:uniform", "physics:uniform"]
         physics, learned = methods["physics:uniform"], methods["vt-addf:uniform"]
         assert set(physics) == set(learned)  # the same summary, field for field
@@ -254,7 +254,10 @@ def test_physics_rows_beside_the_learned_ones(physics_eval):
         np.testing.assert_array_equal(
             runs["physics_uniform"]["pushes_action"], runs["vt-addf_uniform"]["pushes_action"]
         )  # the pushes' fields by name (`testbed.sim.stack_records`, `suite.PUSH_PREFIX`)
-        assert "replayed" in results["sets"][set_name]["notes"]["physics:uniform"]
+        assert "replayed" in results.sets[set_name]["notes"]["physics:uniform"]
+    written = json.loads((out / "results.json").read_text())
+    assert written == json.loads(json.dumps(results.to_json(), default=float))
+    assert list(written)[:3] == ["sets", "methods", "primary"] and "kept" not in written
 
 
 def test_physics_sets_must_be_sets_the_evaluation_makes(tmp_path):
@@ -285,14 +288,14 @@ def test_the_cache_key_names_the_estimator(tmp_path):
 
 def test_a_random_set_of_one_object(physics_eval):
     results, _, _ = physics_eval
-    s = results["sets"]["random"]
+    s = results.sets["random"]
     assert s["objects"] == ["random:9001:0"] and s["folds"] == 1
     assert set(s["methods"]) == {
         "vt-addf:uniform", "physics:uniform", "prior-mean", "forest", "forest-visnet"
     }  # fmt: skip
     assert all(m["objects"] == 1 for m in s["methods"].values())
-    assert results["config"]["random_objects"] == 1
-    assert results["config"]["random_seed"] == 9001
+    assert results.config.random_objects == 1
+    assert results.config.random_seed == 9001
 
 
 def test_merge_keeps_rows_and_computes_only_missing_ones(physics_eval, tmp_path, monkeypatch):
@@ -306,7 +309,7 @@ def test_merge_keeps_rows_and_computes_only_missing_ones(physics_eval, tmp_path,
     from pushtoknow.testbed.object_refs import load_object_spec
 
     results, run, _ = physics_eval
-    kept = json.loads(json.dumps(results, default=float))
+    kept = json.loads(json.dumps(results.to_json(), default=float))
     full_physics = kept["sets"]["heldout"]["methods"].pop("physics:uniform")
     del kept["sets"]["random"]
     kept["sets"]["heldout"]["methods"]["vt-addf:uniform"]["nrmse"]["overall"] = 123.0
@@ -323,7 +326,7 @@ def test_merge_keeps_rows_and_computes_only_missing_ones(physics_eval, tmp_path,
     monkeypatch.setattr(suite, "evaluate_heldout", counting)
     cfg = EvaluationConfig.model_validate(TINY_EVAL)
     merged = suite.run_evaluation(None, [run], cfg, tmp_path / "out", keep=keep)
-    held, old_held = merged["sets"]["heldout"]["methods"], kept["sets"]["heldout"]["methods"]
+    held, old_held = merged.methods, kept["sets"]["heldout"]["methods"]
     for name, row in old_held.items():
         assert held[name] == row, name  # bit-identical
     assert held["vt-addf:uniform"]["nrmse"]["overall"] == 123.0
@@ -338,21 +341,21 @@ def test_merge_keeps_rows_and_computes_only_missing_ones(physics_eval, tmp_path,
         ("vt-addf", ("random:9001:0",), False),
         ("physics", ("random:9001:0",), True),
     ]
-    rnd = merged["sets"]["random"]
+    rnd = merged.sets["random"]
     assert set(rnd["methods"]) == {"vt-addf:uniform", "physics:uniform", "prior-mean"}
     assert rnd["notes"]["forest"] == rnd["notes"]["forest-visnet"] == suite.NO_DATA
     assert "prior_moments" in rnd["notes"]["prior-mean"]
     mean, _ = si_moments(*prior_moments())
     truth = load_object_spec("random:9001:0").params.as_array()[None]
     assert rnd["methods"]["prior-mean"]["nrmse_all"] == nrmse(mean[None], truth)
-    assert merged["kept"]["rows"] == {"heldout": list(old_held)}
-    assert merged["data"] == kept["data"] and merged["primary"] == "vt-addf:uniform"
+    assert merged.kept["rows"] == {"heldout": list(old_held)}
+    assert merged.data == kept["data"] and merged.primary == "vt-addf:uniform"
     # physics rows on the random set only: the held-out set gains none and runs nothing
     calls.clear()
     only_random = cfg.model_copy(update={"physics_sets": ("random",)})
     part = suite.run_evaluation(None, [run], only_random, tmp_path / "part", keep=keep)
-    assert "physics:uniform" not in part["sets"]["heldout"]["methods"]
-    assert "physics:uniform" in part["sets"]["random"]["methods"]
+    assert "physics:uniform" not in part.methods
+    assert "physics:uniform" in part.sets["random"]["methods"]
     assert calls == [
         ("vt-addf", ("random:9001:0",), False),
         ("physics", ("random:9001:0",), True),
@@ -367,7 +370,7 @@ def test_merge_refuses_rows_of_another_config(physics_eval, tmp_path):
     results, run, _ = physics_eval
     cfg = EvaluationConfig.model_validate(TINY_EVAL)
     for key, value in (("pushes", 3), ("policies", ["uniform", "random"]), ("seed", 1)):
-        kept = json.loads(json.dumps(results, default=float))
+        kept = json.loads(json.dumps(results.to_json(), default=float))
         kept["config"][key] = value
         keep = tmp_path / f"{key}.json"
         keep.write_text(json.dumps(kept))

@@ -4,10 +4,10 @@ import numpy as np
 
 from pushtoknow.common.params import ObjectParams
 from pushtoknow.datasets.shards import ObjectEpisode, shard_path, write_shard
-from pushtoknow.testbed.config import SimConfig
 from pushtoknow.testbed.objects import ObjectSpec
 from pushtoknow.testbed.push import Push
 from pushtoknow.testbed.sim import PushSimulator
+from pushtoknow.testbed.sim_config import SimConfig
 
 SHORT = SimConfig().model_copy(
     update={"push": SimConfig().push.model_copy(update={"horizon": 2.0})}

@@ -9,13 +9,13 @@ from hypothesis import strategies as st
 from scipy.stats import norm
 
 from pushtoknow.common.params import ObjectParams, normalise_params, space_scale
-from pushtoknow.identification.config import IdentifyConfig
 from pushtoknow.identification.fit import identify
+from pushtoknow.identification.identify_config import IdentifyConfig
 from pushtoknow.identification.prior import fit_transform, prior_moments
 from pushtoknow.identification.replay import ReplayScene, feasible
 from pushtoknow.identification.synthetic import simulate_pushes
-from pushtoknow.testbed.config import SimConfig
 from pushtoknow.testbed.objects import COM_MARGIN, ObjectSpec, resolve_shape
+from pushtoknow.testbed.sim_config import SimConfig
 
 SHORT = SimConfig(render=False).model_copy(
     update={"push": SimConfig().push.model_copy(update={"horizon": 3.0})}

@@ -120,8 +120,8 @@ def test_identify_with_the_footprint_from_the_mask(tiny):
     """With the footprint traced on the outline-resolution mask, μ·m comes out within 5%; the
     CoM, which one 2 s push barely shows, is reported in the record's frame and within its
     uncertainty (measured: 10 mm off, z 0.9 and −0.3)."""
-    from pushtoknow.identification.config import IdentifyConfig
     from pushtoknow.identification.fit import identify
+    from pushtoknow.identification.identify_config import IdentifyConfig
 
     (obj,) = load_recorded_objects(tiny)
     res = identify(obj.records, replay_scene(obj, "from-mask"), IdentifyConfig(workers=1))

@@ -16,8 +16,8 @@ from pushtoknow.identification.recursive import (
     iterated_update,
 )
 from pushtoknow.identification.replay import PushTrack, ReplayScene
-from pushtoknow.testbed.config import SimConfig
 from pushtoknow.testbed.push import Push
+from pushtoknow.testbed.sim_config import SimConfig
 
 T = 8  # samples per push
 SQUARE = {"type": "polygon", "vertices": [[-0.1, -0.1], [0.1, -0.1], [0.1, 0.1], [-0.1, 0.1]]}

@@ -5,11 +5,11 @@ import numpy as np
 from pushtoknow.common.params import ObjectParams
 from pushtoknow.identification import replay
 from pushtoknow.identification.replay import PushTrack, ReplayScene, simulate_track
-from pushtoknow.testbed.config import SimConfig
 from pushtoknow.testbed.objects import ObjectSpec
 from pushtoknow.testbed.push import Push
 from pushtoknow.testbed.random_shapes import random_object_at
 from pushtoknow.testbed.sim import PushSimulator
+from pushtoknow.testbed.sim_config import SimConfig
 
 CONFIG = SimConfig(render=False)
 SPEC = random_object_at(101, 3)

@@ -15,11 +15,11 @@ from pushtoknow.identification.sysid_baseline import (
     sysid_fit,
     sysid_residuals,
 )
-from pushtoknow.testbed.config import SimConfig
 from pushtoknow.testbed.objects import ObjectSpec, resolve_shape
 from pushtoknow.testbed.push import Push
 from pushtoknow.testbed.scene import support_loads, support_points
 from pushtoknow.testbed.sim import PushSimulator
+from pushtoknow.testbed.sim_config import SimConfig
 
 # 2 s pushes, no images; the pad starts 3 mm off the object so it pushes for 1.85 s (37 mm)
 SHORT = SimConfig(render=False).model_copy(

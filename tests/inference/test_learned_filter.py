@@ -5,9 +5,9 @@ import numpy as np
 from pushtoknow.common.params import ObjectParams
 from pushtoknow.identification.synthetic import simulate_pushes
 from pushtoknow.inference.learned_filter import outside_training
-from pushtoknow.testbed.config import SimConfig
 from pushtoknow.testbed.objects import ObjectSpec
 from pushtoknow.testbed.shapes import footprint_from_shape
+from pushtoknow.testbed.sim_config import SimConfig
 
 SIM = SimConfig(render=False)
 

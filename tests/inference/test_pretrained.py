@@ -10,10 +10,10 @@ from pushtoknow.inference import InferenceConfig, infer_object, infer_simulated
 from pushtoknow.models.calibration import DIRECTIONS
 from pushtoknow.models.checkpoint import load_checkpoint
 from pushtoknow.pretrained import pretrained_dir, resolve_model_path
-from pushtoknow.testbed.config import TESTBED_VERSION
 from pushtoknow.testbed.executor import SimulatedExecutor
 from pushtoknow.testbed.object_refs import load_object_spec
 from pushtoknow.testbed.objects import catalogue_split, demo_object_id
+from pushtoknow.testbed.sim_config import TESTBED_VERSION
 from pushtoknow.training.pipeline import TrainConfig, visnet_config_for
 
 REPO = Path(__file__).resolve().parents[2]

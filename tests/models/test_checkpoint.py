@@ -211,7 +211,7 @@ def test_resolve_model_path(tmp_path):
 
 
 def test_sim_config_of_models_saved_before_the_orientation_marker():
-    from pushtoknow.testbed.config import SimConfig, stored_sim_config
+    from pushtoknow.testbed.sim_config import SimConfig, stored_sim_config
 
     assert stored_sim_config(None).orientation_marker is False
     old = SimConfig().model_dump(mode="json")
@@ -221,7 +221,7 @@ def test_sim_config_of_models_saved_before_the_orientation_marker():
 
 
 def test_models_saved_before_testbed_versions_read_back_as_version_1(saved, tmp_path):
-    from pushtoknow.testbed.config import TESTBED_VERSION, SimConfig
+    from pushtoknow.testbed.sim_config import TESTBED_VERSION, SimConfig
 
     _, run = saved
     payload = payload_of(run)

@@ -10,11 +10,11 @@ from pushtoknow.geometry.affordances import sample_push_affordances
 from pushtoknow.models.contact import limit_surface_push, radius_of_gyration
 from pushtoknow.models.physics import CONTACT_REACH, CONTACT_SOFTNESS, GyrationArm
 from pushtoknow.perception.footprint import footprint_seen
-from pushtoknow.testbed.config import SimConfig
 from pushtoknow.testbed.executor import SimulatedExecutor
 from pushtoknow.testbed.object_refs import load_object_spec
 from pushtoknow.testbed.objects import novel_objects
 from pushtoknow.testbed.push import Push
+from pushtoknow.testbed.sim_config import SimConfig
 
 F64 = torch.float64
 

@@ -20,9 +20,9 @@ from pushtoknow.models.physics import (
     PhysicsDynamics,
 )
 from pushtoknow.testbed import fidelity as fid
-from pushtoknow.testbed.config import SimConfig
 from pushtoknow.testbed.objects import ObjectSpec
 from pushtoknow.testbed.push import Push, release_point, release_points
+from pushtoknow.testbed.sim_config import SimConfig
 
 F64 = torch.float64
 PUSH = SimConfig().push

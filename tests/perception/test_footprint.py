@@ -18,10 +18,10 @@ from pushtoknow.perception.footprint import (
     object_top,
     resample,
 )
-from pushtoknow.testbed.config import SimConfig
 from pushtoknow.testbed.executor import SimulatedExecutor
 from pushtoknow.testbed.objects import novel_objects
 from pushtoknow.testbed.shapes import CATALOGUE_SHAPES, footprint_from_shape
+from pushtoknow.testbed.sim_config import SimConfig
 
 CAM = CameraModel(64, 64, 45.0, (0.0, 0.0, 0.75))
 

@@ -4,11 +4,11 @@ import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
 
-from pushtoknow.testbed.config import PushConfig, SimConfig
 from pushtoknow.testbed.env import PushEnv
 from pushtoknow.testbed.executor import RecordedExecutor, SimulatedExecutor
 from pushtoknow.testbed.objects import catalogue_object
 from pushtoknow.testbed.push import Push
+from pushtoknow.testbed.sim_config import PushConfig, SimConfig
 
 FAST = SimConfig(push=PushConfig(horizon=1.5))
 

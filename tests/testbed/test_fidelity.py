@@ -8,9 +8,9 @@ import pytest
 from pushtoknow.common.errors import TestbedVersionError
 from pushtoknow.common.params import CATALOGUE_GRID, GRAVITY
 from pushtoknow.testbed import fidelity as fid
-from pushtoknow.testbed.config import SimConfig, stored_sim_config
 from pushtoknow.testbed.push import release_profile
 from pushtoknow.testbed.sim import PushSimulator
+from pushtoknow.testbed.sim_config import SimConfig, stored_sim_config
 
 SENSOR_NOISE_N = SimConfig().tactile.force_noise_std
 

@@ -5,10 +5,10 @@ import math
 import numpy as np
 import pytest
 
-from pushtoknow.testbed.config import PadConfig, PushConfig, SimConfig
 from pushtoknow.testbed.executor import SimulatedExecutor
 from pushtoknow.testbed.object_refs import load_object_spec
 from pushtoknow.testbed.push import PAD_CLEARANCE, Push, pad_positions
+from pushtoknow.testbed.sim_config import PadConfig, PushConfig, SimConfig
 
 FAST = SimConfig(push=PushConfig(horizon=1.5), render=False)
 # catalogue:412 is a triangle with a flat face at x = FACE_X (object frame), spanning y ∈ [-0.084,

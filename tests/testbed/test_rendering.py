@@ -51,7 +51,7 @@ def test_depth_is_metric_and_rgb_shows_object():
 def test_orientation_marker_shows_the_object_frame_x_axis(shape, theta):
     """The dark decal covers the +x half of the object frame, so even a disc's θ is visible:
     the direction from the object's centre to the dark pixels is θ."""
-    from pushtoknow.testbed.config import SimConfig
+    from pushtoknow.testbed.sim_config import SimConfig
 
     spec = ObjectSpec(shape=shape, params=ObjectParams(0.8, 0.5, 0.0, 0.0, 0.5e-3))
     sim = PushSimulator(spec, SimConfig(orientation_marker=True))
@@ -70,7 +70,7 @@ def test_orientation_marker_shows_the_object_frame_x_axis(shape, theta):
 
 
 def test_orientation_marker_changes_pixels_not_physics():
-    from pushtoknow.testbed.config import SimConfig
+    from pushtoknow.testbed.sim_config import SimConfig
 
     spec = catalogue_object(500)
     recs = []

@@ -7,11 +7,11 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from pushtoknow.common.params import ObjectParams
-from pushtoknow.testbed.config import SimConfig
 from pushtoknow.testbed.push import Push
 from pushtoknow.testbed.random_shapes import random_object_at
 from pushtoknow.testbed.scene import mass_layout
 from pushtoknow.testbed.sim import PushSimulator
+from pushtoknow.testbed.sim_config import SimConfig
 
 CONFIG = SimConfig(render=False)
 SPEC = random_object_at(101, 0)

@@ -18,7 +18,7 @@ from pushtoknow.collection.collect import (
 from pushtoknow.common.errors import DatasetError
 from pushtoknow.datasets.generate import GENERATION_FILE, GenerationConfig, generate_dataset
 from pushtoknow.datasets.shards import dataset_info, list_shards, read_shard
-from pushtoknow.testbed.config import PushConfig, SimConfig
+from pushtoknow.testbed.sim_config import PushConfig, SimConfig
 from pushtoknow.training.pipeline import train_model
 from pushtoknow.training.push_tensors import load_push_tensors
 from tiny_training import DATA_OBJECTS, DATA_PUSHES, DATA_SEED, SIGMA_POINTS, tiny_train_config

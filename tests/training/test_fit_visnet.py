@@ -9,7 +9,7 @@ import torch
 from pushtoknow.datasets.generate import GenerationConfig, generate_dataset
 from pushtoknow.perception.footprint import FOOTPRINT_VERTICES, footprint_from_mask
 from pushtoknow.perception.visnet import visnet_inputs
-from pushtoknow.testbed.config import PushConfig, SimConfig
+from pushtoknow.testbed.sim_config import PushConfig, SimConfig
 from pushtoknow.training.fit_visnet import (
     VisNetTrainConfig,
     evaluate_visnet,

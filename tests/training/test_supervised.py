@@ -5,7 +5,7 @@ import torch
 
 from pushtoknow.datasets.generate import GenerationConfig, generate_dataset
 from pushtoknow.models.learned import build_learned_models
-from pushtoknow.testbed.config import PushConfig, SimConfig
+from pushtoknow.testbed.sim_config import PushConfig, SimConfig
 from pushtoknow.training.push_tensors import load_push_tensors
 from pushtoknow.training.supervised import (
     SupervisedConfig,

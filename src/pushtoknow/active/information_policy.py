@@ -16,7 +16,7 @@ import torch
 from pydantic import Field
 
 from pushtoknow.active.selection import ScoreName, score_candidates
-from pushtoknow.common.config import Config
+from pushtoknow.common.frozen_config import Config
 from pushtoknow.filters.base import BeliefFilter
 
 if TYPE_CHECKING:

@@ -188,7 +188,7 @@ def features_from_dataset(root, pose_fn=None):
 
     from pushtoknow.common.errors import DatasetError
     from pushtoknow.datasets.shards import list_shards, open_shard, read_shard
-    from pushtoknow.testbed.config import SimConfig
+    from pushtoknow.testbed.sim_config import SimConfig
 
     shards = list_shards(root)
     if not shards:

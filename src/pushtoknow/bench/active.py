@@ -31,8 +31,8 @@ from pushtoknow.common.camera import CameraModel
 from pushtoknow.filters.base import FilterConfig
 from pushtoknow.models.context import PushContext, with_pad_track
 from pushtoknow.models.learned import LearnedModelsConfig, build_filter
-from pushtoknow.testbed.config import PushConfig, TactileConfig
 from pushtoknow.testbed.push import PROFILES, Push, pad_positions, release_points
+from pushtoknow.testbed.sim_config import PushConfig, TactileConfig
 
 DISC_RADIUS_M = 0.04
 FOOTPRINT_VERTICES = 24

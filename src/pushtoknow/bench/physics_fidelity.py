@@ -38,7 +38,7 @@ class PhysicsReport:
 def run_physics_bench(seed: int = 0, quick: bool = False) -> PhysicsReport:
     """All probes; `quick` runs one shape and the grid corners only (for tests)."""
     from pushtoknow.testbed import fidelity as fid
-    from pushtoknow.testbed.config import SimConfig
+    from pushtoknow.testbed.sim_config import SimConfig
 
     t0 = time.perf_counter()
     shapes = CHAOS_SHAPES[:1] if quick else CHAOS_SHAPES

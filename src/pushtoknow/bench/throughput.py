@@ -40,10 +40,10 @@ def run_sim_bench(
     """Time `pushes` constant-speed pushes of one object (`object_source`) in one process."""
     from pushtoknow.common.random import stream, stream_seed
     from pushtoknow.geometry.affordances import sample_push_affordances
-    from pushtoknow.testbed.config import SimConfig
     from pushtoknow.testbed.executor import SimulatedExecutor
     from pushtoknow.testbed.object_refs import load_object_spec
     from pushtoknow.testbed.push import Push
+    from pushtoknow.testbed.sim_config import SimConfig
 
     cfg = SimConfig()
     ex = SimulatedExecutor(

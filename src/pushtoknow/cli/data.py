@@ -62,7 +62,7 @@ def simulate(
     """Simulate pushes and write an HDF5 dataset (atomic shards, resumable)."""
     from pushtoknow.common.parallel import make_runner
     from pushtoknow.datasets.generate import GenerationConfig, generate_dataset
-    from pushtoknow.testbed.config import SimConfig
+    from pushtoknow.testbed.sim_config import SimConfig
 
     try:
         sim = SimConfig.from_yaml(config) if config else SimConfig()

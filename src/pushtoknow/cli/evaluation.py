@@ -293,13 +293,14 @@ def evaluate_cmd(
             keep=keep,
         )
     command = command_line(ctx)
-    (out / "RESULTS.md").write_text(render_report(results, command, extra))
+    full = results.to_json()
+    (out / "RESULTS.md").write_text(render_report(full, command, extra))
     if as_json:
-        print(json.dumps({k: results[k] for k in ("methods", "primary", "config")}))
+        print(json.dumps({k: full[k] for k in ("methods", "primary", "config")}))
         return
     from pushtoknow.reporting.results import COLUMNS
 
-    for set_name, s in results["sets"].items():
+    for set_name, s in results.sets.items():
         t = Table(title=f"NRMSE after {cfg.pushes} pushes, {set_name} ({len(s['objects'])})")
         for c in ["method", *COLUMNS, "μ·m", "cov90"]:
             t.add_column(c, justify="right")

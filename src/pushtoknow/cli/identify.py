@@ -115,8 +115,8 @@ def identify_cmd(
 
     from pushtoknow.api import export_identification
     from pushtoknow.common.parallel import make_runner
-    from pushtoknow.identification.config import IdentifyConfig
     from pushtoknow.identification.fit import identify
+    from pushtoknow.identification.identify_config import IdentifyConfig
     from pushtoknow.identification.prior import EVERYDAY_PRIOR
     from pushtoknow.identification.recordings import load_recorded_objects, replay_scene
     from pushtoknow.identification.replay import RolloutPool
@@ -219,7 +219,7 @@ def identify_bench_cmd(
 
     from pushtoknow.common.params import PARAM_NAMES
     from pushtoknow.evaluation.identification import run_identification_benchmark
-    from pushtoknow.identification.config import IdentifyConfig
+    from pushtoknow.identification.identify_config import IdentifyConfig
 
     names = parse_profiles(profiles)
     cfg = IdentifyConfig(workers=workers)

@@ -36,9 +36,9 @@ import h5py
 import numpy as np
 from pydantic import Field
 
-from pushtoknow.common.config import Config
 from pushtoknow.common.errors import DatasetError
 from pushtoknow.common.files import file_sha256
+from pushtoknow.common.frozen_config import Config
 from pushtoknow.common.parallel import Workers
 from pushtoknow.common.params import MIN_SIGMA_POINTS
 from pushtoknow.common.policy_names import POLICY_NAMES, PolicyName
@@ -57,8 +57,8 @@ from pushtoknow.datasets.shards import (
     shard_path,
     write_shard,
 )
-from pushtoknow.testbed.config import SimConfig
 from pushtoknow.testbed.objects import ObjectSpec
+from pushtoknow.testbed.sim_config import SimConfig
 
 COMBINED_FILE = "combined.json"
 

@@ -60,11 +60,11 @@ import numpy as np
 import torch
 from pydantic import Field, field_validator
 
-from pushtoknow.common.config import Config
 from pushtoknow.common.errors import DatasetError
+from pushtoknow.common.frozen_config import Config
 from pushtoknow.common.params import MIN_SIGMA_POINTS
 from pushtoknow.common.policy_names import POLICY_NAMES, PolicyName
-from pushtoknow.testbed.config import SimConfig
+from pushtoknow.testbed.sim_config import SimConfig
 from pushtoknow.training.pipeline import TrainConfig
 
 ABLATION_FILE = "ablation.json"

@@ -17,9 +17,9 @@ import numpy as np
 import yaml
 from pydantic import Field
 
-from pushtoknow.common.config import Config, read_utf8
 from pushtoknow.common.errors import DatasetError, ObjectSpecError, yaml_error_summary
 from pushtoknow.common.files import atomic_write, file_sha256
+from pushtoknow.common.frozen_config import Config, read_utf8
 from pushtoknow.common.parallel import Workers, runner_for
 from pushtoknow.datasets.lock import dataset_lock
 from pushtoknow.datasets.shards import (
@@ -32,7 +32,6 @@ from pushtoknow.datasets.shards import (
     write_shard,
 )
 from pushtoknow.geometry.affordances import sample_push_affordances
-from pushtoknow.testbed.config import SimConfig
 from pushtoknow.testbed.executor import SimulatedExecutor
 from pushtoknow.testbed.object_refs import load_object_spec
 from pushtoknow.testbed.objects import (
@@ -44,6 +43,7 @@ from pushtoknow.testbed.objects import (
 )
 from pushtoknow.testbed.push import Push
 from pushtoknow.testbed.random_shapes import random_objects
+from pushtoknow.testbed.sim_config import SimConfig
 
 
 class GenerationConfig(Config):

@@ -29,14 +29,14 @@ from typing import Any, Literal
 import numpy as np
 from pydantic import Field, field_validator
 
-from pushtoknow.common.config import Config
 from pushtoknow.common.errors import DatasetError
+from pushtoknow.common.frozen_config import Config
 from pushtoknow.common.params import PARAM_NAMES
 from pushtoknow.datasets.mit_push import window_means
 from pushtoknow.datasets.recording import RawPush, RecordingMeta, records_from_pushes
-from pushtoknow.testbed.config import PadConfig
 from pushtoknow.testbed.objects import DEFAULT_HEIGHT
 from pushtoknow.testbed.sim import PushRecord
+from pushtoknow.testbed.sim_config import PadConfig
 
 __all__ = ["BagOptions", "is_bag", "read_bag"]
 

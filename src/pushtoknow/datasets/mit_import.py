@@ -100,10 +100,10 @@ from pushtoknow.datasets.shards import (
     shard_path,
     write_shard,
 )
-from pushtoknow.testbed.config import PadConfig, SimConfig, TactileConfig
 from pushtoknow.testbed.objects import DEFAULT_HEIGHT, ObjectSpec
 from pushtoknow.testbed.push import Push
 from pushtoknow.testbed.sim import PushRecord, PushSimulator, mujoco
+from pushtoknow.testbed.sim_config import PadConfig, SimConfig, TactileConfig
 
 __all__ = [
     "FALLBACK_FRICTION",

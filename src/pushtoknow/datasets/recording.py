@@ -39,10 +39,10 @@ from pushtoknow.datasets.mit_push import (
     window_means,
 )
 from pushtoknow.datasets.pad_track import push_from_track
-from pushtoknow.testbed.config import PadConfig, SimConfig
 from pushtoknow.testbed.objects import DEFAULT_HEIGHT, FRICTION_LIMIT, ObjectSpec
 from pushtoknow.testbed.push import PROFILES, Push
 from pushtoknow.testbed.sim import PushRecord
+from pushtoknow.testbed.sim_config import PadConfig, SimConfig
 
 __all__ = [
     "FORMAT",

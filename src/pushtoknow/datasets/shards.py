@@ -32,10 +32,10 @@ import numpy as np
 from pushtoknow.common.errors import DatasetError, PushToKnowWarning, first_line
 from pushtoknow.common.files import atomic_write
 from pushtoknow.common.version import __version__
-from pushtoknow.testbed.config import stored_sim_config
 from pushtoknow.testbed.objects import ObjectSpec
 from pushtoknow.testbed.push import Push
 from pushtoknow.testbed.sim import PushRecord
+from pushtoknow.testbed.sim_config import stored_sim_config
 
 SCHEMA_VERSION = 1
 SHARD_GLOB = "shard-*.h5"

@@ -25,12 +25,12 @@ import numpy as np
 from pushtoknow.common.parallel import Workers
 from pushtoknow.common.params import PARAM_NAMES
 from pushtoknow.evaluation.metrics import MethodRun, coverage, nrmse, product_nrmse
-from pushtoknow.identification.config import IdentifyConfig
 from pushtoknow.identification.fit import LEVEL, identify
+from pushtoknow.identification.identify_config import IdentifyConfig
 from pushtoknow.identification.replay import ReplayScene, RolloutPool
 from pushtoknow.identification.synthetic import add_tracking_noise, simulate_pushes
-from pushtoknow.testbed.config import SimConfig
 from pushtoknow.testbed.objects import novel_objects, resolve_shape
+from pushtoknow.testbed.sim_config import SimConfig
 
 
 def push_profiles(profiles: Sequence[str], pushes: int) -> list[str]:

@@ -66,8 +66,8 @@ from pushtoknow.datasets.mit_push import (
     read_mit_push,
 )
 from pushtoknow.identification.prior import EVERYDAY_PRIOR, PriorRanges
-from pushtoknow.testbed.config import SimConfig
 from pushtoknow.testbed.sim import PushRecord
+from pushtoknow.testbed.sim_config import SimConfig
 
 __all__ = [
     "ESTIMATORS",
@@ -314,7 +314,7 @@ def _recorded_objects(root: Path, max_pushes: int | None, images: bool) -> list[
         episodes = {}
         if images:
             from pushtoknow.datasets.shards import open_shard
-            from pushtoknow.testbed.config import stored_sim_config
+            from pushtoknow.testbed.sim_config import stored_sim_config
 
             with open_shard(shard) as f:
                 camera = stored_sim_config(f.attrs.get("sim_config")).camera.model()

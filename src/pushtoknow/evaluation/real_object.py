@@ -89,9 +89,9 @@ from pushtoknow.reporting.real_report import RealIdentification, RealReport
 if TYPE_CHECKING:
     from pushtoknow.common.camera import CameraModel
     from pushtoknow.models.checkpoint import TrainedModel
-    from pushtoknow.testbed.config import SimConfig
     from pushtoknow.testbed.objects import ObjectSpec
     from pushtoknow.testbed.sim import PushRecord
+    from pushtoknow.testbed.sim_config import SimConfig
 
 __all__ = [
     "PURE_TRANSLATION_DEG",
@@ -159,7 +159,7 @@ def load_real_object(data_dir: Path, obj: str | None = None) -> RealPushes:
         )
     info = json.loads(info_file.read_text())
     found = []  # (surface, shape, shard, key)
-    from pushtoknow.testbed.config import SimConfig
+    from pushtoknow.testbed.sim_config import SimConfig
 
     for s in list_shards(data_dir):
         with open_shard(s) as f:
@@ -335,7 +335,7 @@ def _training_features(root: Path):
     """Features (N, F) of every push of a simulated dataset (ground-truth poses), params (N,
     5) SI, object index (N,). Images are not read (only S_0 is needed)."""
     from pushtoknow.baselines.random_forest import features_from_records
-    from pushtoknow.testbed.config import SimConfig
+    from pushtoknow.testbed.sim_config import SimConfig
 
     X, Y, obj = [], [], []
     shards = list_shards(root)
@@ -676,8 +676,8 @@ def identify_real(data_dir: Path, real: RealPushes, seed: int, config=None) -> R
     clock: a push time-rescaled by s at rate r Hz is the recording sampled at r·s Hz, so it is
     replayed at that rate (the import's pushes must share one time scale). The recording has
     no noise level, so each channel's noise is its misfit (`identify`)."""
-    from pushtoknow.identification.config import IdentifyConfig
     from pushtoknow.identification.fit import identify
+    from pushtoknow.identification.identify_config import IdentifyConfig
     from pushtoknow.identification.recordings import recorded_clock
     from pushtoknow.identification.replay import ReplayScene, RolloutPool
 

@@ -56,6 +56,7 @@ import hashlib
 import json
 import os
 import platform
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
 
@@ -65,8 +66,8 @@ from scipy.stats import norm
 
 from pushtoknow.active.information_policy import ACTIVE_POLICY_NAMES
 from pushtoknow.baselines.random_forest import ForestBaseline, ForestConfig, features_from_dataset
-from pushtoknow.common.config import Config
 from pushtoknow.common.errors import ConfigError
+from pushtoknow.common.frozen_config import Config
 from pushtoknow.common.parallel import TaskRunner, Workers
 from pushtoknow.common.params import MIN_SIGMA_POINTS, PARAM_NAMES
 from pushtoknow.common.policy_names import POLICY_NAMES, PolicyName
@@ -478,6 +479,48 @@ def _variant_names(loaded: list) -> list[str]:
     return names
 
 
+@dataclass(frozen=True)
+class EvaluationResults:
+    """What `run_evaluation` returns; `to_json()` is results.json.
+
+    sets: per set ("heldout", "novel", "random", and a kept results' other sets) {"objects":
+    object IDs, "folds": groups, "methods": {row: `summarise_method` summary, NRMSE
+    dimensionless}, "notes": {row: why it is as it is}}; primary: the primary row
+    (`<variant>:<first policy>`); config: the settings; data: the training data the forest and
+    prior-mean rows were fitted on ({"path", "pushes", "objects"}; None: none); models: per
+    model {"name", "path", "structure", "info"}; kept: {"from": results.json, "rows": {set:
+    kept rows}} when rows were kept, else None; machine: `machine_description()`; figures:
+    {figure: path}."""
+
+    sets: dict[str, dict]
+    primary: str
+    config: EvaluationConfig
+    data: dict | None
+    models: list[dict]
+    kept: dict | None
+    machine: dict
+    figures: dict[str, str]
+
+    @property
+    def methods(self) -> dict[str, dict]:
+        """The held-out set's rows: {row: summary}."""
+        return self.sets["heldout"]["methods"]
+
+    def to_json(self) -> dict:
+        """The results.json dict ("kept" only when rows were kept)."""
+        out = {
+            "sets": self.sets,
+            "methods": self.methods,
+            "primary": self.primary,
+            "config": self.config.model_dump(mode="json"),
+            "data": self.data,
+            "models": self.models,
+        }
+        if self.kept is not None:
+            out["kept"] = self.kept
+        return out | {"machine": self.machine, "figures": self.figures}
+
+
 def machine_description() -> dict:
     import torch
 
@@ -558,10 +601,10 @@ def run_evaluation(
     echo=None,
     runner: TaskRunner | None = None,
     keep: Path | None = None,
-) -> dict:
+) -> EvaluationResults:
     """Evaluate `models` (checkpoint paths; the first is the primary one), the physics estimator
-    and the baselines on the held-out, novel and random sets; returns the results dict (also
-    written to OUT/results.json). data: the training dataset the forest and the prior-mean row
+    and the baselines on the held-out, novel and random sets; returns the results (also written
+    to OUT/results.json). data: the training dataset the forest and the prior-mean row
     are fitted on (None: no forest rows, the estimators' prior as the prior-mean row);
     keep: a results.json whose rows are kept, not recomputed (module doc; ConfigError when
     its settings differ). progress(description, total) → advance callable; echo(str) for
@@ -606,7 +649,7 @@ def run_evaluation(
         prior = PriorMeanPredictor().fit(Y[first])
         data_info = {"path": str(data), "pushes": int(len(X)), "objects": int(len(first))}
 
-    results: dict = {"sets": {}}
+    results_sets: dict[str, dict] = {}
     runs_for_figures: dict[str, dict[str, MethodRun]] = {}
     kept_rows: dict[str, list[str]] = {}
     k1 = cfg.pushes + 1
@@ -740,40 +783,41 @@ def run_evaluation(
         }
         if notes:
             entry["notes"] = notes
-        results["sets"][set_name] = entry
+        results_sets[set_name] = entry
         runs_for_figures[set_name] = figure_methods
     for set_name, s in kept_sets.items():  # sets this run does not define: kept as they are
-        if set_name not in results["sets"]:
-            results["sets"][set_name] = s
+        if set_name not in results_sets:
+            results_sets[set_name] = s
             kept_rows[set_name] = list(s.get("methods", {}))
-    results["methods"] = results["sets"]["heldout"]["methods"]
-    results["primary"] = f"{names[0]}:{base_policy}"
-    results["config"] = cfg.model_dump(mode="json")
-    results["data"] = data_info
+    primary_name = f"{names[0]}:{base_policy}"
     current = [
         {"name": n, "path": str(m), "structure": c.models_config.label, "info": c.info}
         for n, m, c in zip(names, models, loaded)
     ]
     by_name = {m["name"]: m for m in current}
     old_models = [] if kept is None else kept.get("models", [])
-    results["models"] = [by_name.pop(m["name"], m) for m in old_models] + list(by_name.values())
-    if kept is not None:
-        results["kept"] = {"from": str(keep), "rows": kept_rows}
-    results["machine"] = machine_description()
     primary = _primary_run(
         runs_for_figures,
-        results["primary"],
+        primary_name,
         models[0],
         loaded[0].profiles,
         sets["heldout"],
         cfg,
         out,
     )
-    results["figures"] = write_figures(
-        results["sets"]["heldout"]["methods"], primary, models, names, cfg, out / "figures"
+    held = results_sets["heldout"]["methods"]
+    results = EvaluationResults(
+        sets=results_sets,
+        primary=primary_name,
+        config=cfg,
+        data=data_info,
+        models=[by_name.pop(m["name"], m) for m in old_models] + list(by_name.values()),
+        kept=None if kept is None else {"from": str(keep), "rows": kept_rows},
+        machine=machine_description(),
+        figures=write_figures(held, primary, models, names, cfg, out / "figures"),
     )
     tmp = out / "results.json.tmp"
-    tmp.write_text(json.dumps(results, indent=1, default=_json_default))
+    tmp.write_text(json.dumps(results.to_json(), indent=1, default=_json_default))
     os.replace(tmp, out / "results.json")
     return results
 

@@ -13,7 +13,7 @@ import torch
 from pydantic import field_validator, model_validator
 from torch import nn
 
-from pushtoknow.common.config import Config
+from pushtoknow.common.frozen_config import Config
 from pushtoknow.filters.constraints import StateConstraint
 from pushtoknow.filters.gaussian import (
     CholeskyConfig,

@@ -52,7 +52,7 @@ from pushtoknow.common.params import (
     product_moments,
     space_scale,
 )
-from pushtoknow.identification.config import IdentifyConfig
+from pushtoknow.identification.identify_config import IdentifyConfig
 from pushtoknow.identification.optimise import (
     DescentSettings,
     Objective,
@@ -68,10 +68,10 @@ from pushtoknow.identification.replay import (
     feasible,
 )
 from pushtoknow.identification.residuals import ReplayResiduals
-from pushtoknow.testbed.config import SimConfig, check_testbed_version
 from pushtoknow.testbed.objects import COM_MARGIN
 from pushtoknow.testbed.push import pad_positions
 from pushtoknow.testbed.sim import PushRecord
+from pushtoknow.testbed.sim_config import SimConfig, check_testbed_version
 
 TRACK_TOLERANCE = 1e-3  # m: a recorded pad track may depart this far from its commanded profile
 LEVEL = 0.9
@@ -231,12 +231,22 @@ def tracks_from_records(records: Sequence[PushRecord], sim_config: SimConfig) ->
     return tracks
 
 
-def closed_form_start(records: Sequence[PushRecord], sim_config: SimConfig) -> dict:
-    """Rough φ from the records alone: {"mu_m": kg, "mass": kg or None, "friction": or None}.
-    μ·m: largest median force magnitude of a constant push in steady contact (after
-    `STEADY_AFTER`, or after the middle of a shorter contact phase; ≤ μ·m·g, equal on a
-    centred push) over g; m and μ: medians of `testbed.fidelity.read_release` over
-    release pushes (acceleration F = m(μg + a), free slide v²/(2μg))."""
+@dataclass(frozen=True)
+class ClosedFormReading:
+    """Rough φ read off pushes in closed form (`closed_form_start`); None: not readable from
+    them. mu_m: μ·m (kg); mass: m (kg); friction: μ (dimensionless)."""
+
+    mu_m: float | None
+    mass: float | None
+    friction: float | None
+
+
+def closed_form_start(records: Sequence[PushRecord], sim_config: SimConfig) -> ClosedFormReading:
+    """Rough φ from the records alone (`ClosedFormReading`). μ·m: largest median force
+    magnitude of a constant push in steady contact (after `STEADY_AFTER`, or after the middle
+    of a shorter contact phase; ≤ μ·m·g, equal on a centred push) over g; m and μ: medians of
+    `testbed.fidelity.read_release` over release pushes (acceleration F = m(μg + a), free slide
+    v²/(2μg))."""
     from pushtoknow.testbed.fidelity import read_release
 
     forces, masses, frictions = [], [], []
@@ -264,7 +274,7 @@ def closed_form_start(records: Sequence[PushRecord], sim_config: SimConfig) -> d
         mu_m = mass * friction
     else:
         mu_m = None
-    return {"mu_m": mu_m, "mass": mass, "friction": friction}
+    return ClosedFormReading(mu_m=mu_m, mass=mass, friction=friction)
 
 
 def is_quasi_static(track: PushTrack, rate: float) -> bool:
@@ -410,7 +420,7 @@ class Starts:
     u: np.ndarray
     residuals: np.ndarray
     cost: np.ndarray
-    closed_form: dict
+    closed_form: ClosedFormReading
 
 
 @dataclass(frozen=True, eq=False)
@@ -522,10 +532,10 @@ def fit_starts(problem: FitProblem) -> Starts:
     cf = closed_form_start(problem.records, problem.scene.sim_config)
     z_cf = z_prior.copy()
     i_m, i_mu = PARAM_NAMES.index("mass"), PARAM_NAMES.index("friction")
-    mass0 = cf["mass"] if cf["mass"] is not None else float(denormalise_params(z_prior)[i_m])
+    mass0 = cf.mass if cf.mass is not None else float(denormalise_params(z_prior)[i_m])
     z_cf[i_m] = normalise_params(np.array([mass0, 0.5, 0, 0, 1e-3]))[i_m]
-    if cf["mu_m"] is not None:
-        z_cf[i_mu] = normalise_params(np.array([1.0, cf["mu_m"] / mass0, 0, 0, 1e-3]))[i_mu]
+    if cf.mu_m is not None:
+        z_cf[i_mu] = normalise_params(np.array([1.0, cf.mu_m / mass0, 0, 0, 1e-3]))[i_mu]
     z_cf[2:4] = normalise_params(np.array([1.0, 0.5, 0.0, 0.0, 1e-3]))[2:4]
     rng = np.random.default_rng(problem.seed)
     starts = [tmat @ z_cf]
@@ -821,7 +831,7 @@ def _notes(
             "(acceleration, free slide) and I_z does not enter, so m at fixed μ·m and I_z keep "
             "the prior's width; μ·m and the CoM are identified"
         )
-    elif starts.closed_form["mass"] is None:
+    elif starts.closed_form.mass is None:
         notes.append(
             "no release push: m and μ separate only through dynamic content (acceleration, "
             "free slide), so constant pushes leave them at the prior except for μ·m"

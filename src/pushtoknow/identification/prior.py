@@ -20,7 +20,7 @@ from typing import Annotated
 import numpy as np
 from pydantic import AfterValidator
 
-from pushtoknow.common.config import Config
+from pushtoknow.common.frozen_config import Config
 from pushtoknow.common.params import (
     LOG_PARAMS,
     PARAM_NAMES,

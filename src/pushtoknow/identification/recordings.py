@@ -13,14 +13,14 @@ from typing import TYPE_CHECKING
 import numpy as np
 import yaml
 
-from pushtoknow.common.config import read_utf8
 from pushtoknow.common.errors import DatasetError, IdentificationError, ObjectSpecError
+from pushtoknow.common.frozen_config import read_utf8
 from pushtoknow.identification.prior import CATALOGUE_PRIOR, EVERYDAY_PRIOR, PriorRanges
 from pushtoknow.identification.replay import ReplayScene
-from pushtoknow.testbed.config import SimConfig, stored_sim_config
 from pushtoknow.testbed.objects import NOVEL_SHAPES, recentred_legacy_shape, resolve_shape
 from pushtoknow.testbed.shapes import CATALOGUE_SHAPES, footprint_from_shape
 from pushtoknow.testbed.sim import PushRecord
+from pushtoknow.testbed.sim_config import SimConfig, stored_sim_config
 
 if TYPE_CHECKING:
     from pushtoknow.datasets.mcap_reader import BagOptions

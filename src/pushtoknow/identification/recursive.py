@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 from pydantic import Field
 
-from pushtoknow.common.config import Config
+from pushtoknow.common.frozen_config import Config
 from pushtoknow.identification.fit import (
     is_quasi_static,
     laplace_posterior,

@@ -28,7 +28,6 @@ from shapely.ops import nearest_points
 from pushtoknow.common.errors import IdentificationError, PushToKnowError
 from pushtoknow.common.parallel import LocalRunner, TaskRunner, Workers
 from pushtoknow.common.params import ObjectParams
-from pushtoknow.testbed.config import SimConfig
 from pushtoknow.testbed.objects import (
     COM_MARGIN,
     FRICTION_LIMIT,
@@ -40,6 +39,7 @@ from pushtoknow.testbed.push import Push
 from pushtoknow.testbed.scene import mass_layout
 from pushtoknow.testbed.shapes import Footprint, footprint_from_shape
 from pushtoknow.testbed.sim import PushSimulator
+from pushtoknow.testbed.sim_config import SimConfig
 
 COM_INSET = 2e-4  # m: candidates keep the CoM this far inside the valid region (rounding)
 INERTIA_SHARE = 0.999  # candidates keep I_z below this share of the footprint's bound

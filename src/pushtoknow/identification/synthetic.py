@@ -9,10 +9,10 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from pushtoknow.testbed.config import SimConfig
 from pushtoknow.testbed.objects import ObjectSpec
 from pushtoknow.testbed.push import Push
 from pushtoknow.testbed.sim import PushRecord, PushSimulator
+from pushtoknow.testbed.sim_config import SimConfig
 
 MAX_DEVIATION = math.radians(5.0)
 

@@ -77,8 +77,8 @@ from pushtoknow.common.params import (
     denormalise_params,
     normalise_params,
 )
-from pushtoknow.identification.config import IdentifyConfig
 from pushtoknow.identification.fit import UNKNOWN_FORCE_NOISE
+from pushtoknow.identification.identify_config import IdentifyConfig
 from pushtoknow.identification.prior import footprint_prior, polygon_moments
 from pushtoknow.identification.replay import (
     COM_INSET,
@@ -88,7 +88,6 @@ from pushtoknow.identification.replay import (
     feasible,
 )
 from pushtoknow.testbed import render as _render  # sets MUJOCO_GL before mujoco is imported
-from pushtoknow.testbed.config import SimConfig
 from pushtoknow.testbed.objects import COM_MARGIN, MAX_MASS, MIN_GYRATION_RADIUS, ObjectSpec
 from pushtoknow.testbed.push import speed_profile
 from pushtoknow.testbed.scene import (
@@ -101,6 +100,7 @@ from pushtoknow.testbed.scene import (
 )
 from pushtoknow.testbed.shapes import Footprint
 from pushtoknow.testbed.sim import SETTLE_TIME
+from pushtoknow.testbed.sim_config import SimConfig
 
 mujoco: Any = _render.mujoco  # the compiled module: mypy sees none of its names
 

@@ -27,15 +27,15 @@ import torch
 from pydantic import Field
 
 from pushtoknow.active.selection import ScoreName
-from pushtoknow.common.config import Config
 from pushtoknow.common.estimate import ParameterEstimate, estimate_from_belief
 from pushtoknow.common.estimators import DEFAULT_ESTIMATOR, EstimatorName
+from pushtoknow.common.frozen_config import Config
 from pushtoknow.common.params import MIN_SIGMA_POINTS, PARAM_NAMES
 from pushtoknow.common.policy_names import PolicyName
-from pushtoknow.testbed.config import SimConfig
 from pushtoknow.testbed.executor import View
 from pushtoknow.testbed.push import PROFILES, ProfileName, Push
 from pushtoknow.testbed.sim import PushRecord
+from pushtoknow.testbed.sim_config import SimConfig
 
 INTERVAL_LEVEL = 0.9  # the interval every estimate reports
 

@@ -39,12 +39,12 @@ from pushtoknow.models.checkpoint import TrainedModel
 from pushtoknow.models.context import PushContext, with_pad_track
 from pushtoknow.perception.footprint import footprint_seen, object_top
 from pushtoknow.perception.visnet import frames_as_tensors, start_pose, visnet_measure
-from pushtoknow.testbed.config import SimConfig
 from pushtoknow.testbed.executor import View
 from pushtoknow.testbed.objects import COM_MARGIN, MIN_HEIGHT
 from pushtoknow.testbed.push import Push, pad_positions, release_points
 from pushtoknow.testbed.shapes import CATALOGUE_SHAPES, Footprint, footprint_from_shape
 from pushtoknow.testbed.sim import PushRecord
+from pushtoknow.testbed.sim_config import SimConfig
 
 
 class LearnedFilterEstimator(Estimator):
@@ -244,15 +244,17 @@ def outside_training(
     (m0, m1), (f0, f1) = PARAM_RANGES["mass"], PARAM_RANGES["friction"]
     grow, shrink = 1.0 + TRAINING_MARGIN, 1.0 - TRAINING_MARGIN
     reading = closed_form_start(records, sim_config)
-    mu_m = reading["mu_m"]
+    mu_m = reading.mu_m
     if mu_m is not None and not 0.5 * m0 * f0 * shrink <= mu_m <= m1 * f1 * grow:
         reasons.append(
             f"μ·m ≈ {mu_m:.3g} kg from the steady push force, outside the "
             f"{0.5 * m0 * f0:.3g}–{m1 * f1:.3g} kg the training objects' pushes read (half "
             f"their least μ·m, {m0 * f0:.3g} kg, on an off-centre push, to their largest)"
         )
-    for name, (lo, hi), unit in (("mass", (m0, m1), " kg"), ("friction", (f0, f1), "")):
-        v = reading[name]
+    for name, v, (lo, hi), unit in (
+        ("mass", reading.mass, (m0, m1), " kg"),
+        ("friction", reading.friction, (f0, f1), ""),
+    ):
         if v is not None and not lo * shrink <= v <= hi * grow:
             reasons.append(
                 f"{name} ≈ {v:.3g}{unit} from a release push, outside the training range "

@@ -54,12 +54,12 @@ from pushtoknow.inference.estimator import (
 from pushtoknow.models.checkpoint import TrainedModel
 from pushtoknow.perception.footprint import object_top, replay_outline
 from pushtoknow.perception.visnet import start_pose, visnet_poses
-from pushtoknow.testbed.config import SimConfig
 from pushtoknow.testbed.executor import View
 from pushtoknow.testbed.objects import COM_MARGIN, MIN_HEIGHT, MIN_WIDTH, narrowest_side
 from pushtoknow.testbed.push import Push
 from pushtoknow.testbed.shapes import polygon_footprint
 from pushtoknow.testbed.sim import PushRecord
+from pushtoknow.testbed.sim_config import SimConfig
 
 log = logging.getLogger(__name__)
 OUTLINE_SIMPLIFY = 2e-4  # m: the outline's vertices within this of a line are dropped
@@ -286,11 +286,11 @@ class PhysicsFilterEstimator(Estimator):
         """The prior's mean with μ·m (and m, μ after a release) read off the push in closed
         form (`identification.fit.closed_form_start`), as a second start of the first update."""
         cf = closed_form_start([record], self.sim_config)
-        if cf["mu_m"] is None:
+        if cf.mu_m is None:
             return []
         phi = denormalise_params(self.t_inv @ self.mean)
-        mass = cf["mass"] if cf["mass"] is not None else phi[0]
-        phi[0], phi[1] = mass, cf["mu_m"] / mass
+        mass = cf.mass if cf.mass is not None else phi[0]
+        phi[0], phi[1] = mass, cf.mu_m / mass
         z_cf = normalise_params(phi)
         return [self.tmat @ z_cf]
 

@@ -33,10 +33,10 @@ from pushtoknow.inference.policies import (
     make_policy,
 )
 from pushtoknow.models.checkpoint import TrainedModel
-from pushtoknow.testbed.config import SimConfig
 from pushtoknow.testbed.executor import PushExecutor, SimulatedExecutor, View
 from pushtoknow.testbed.objects import ObjectSpec
 from pushtoknow.testbed.sim import PushRecord
+from pushtoknow.testbed.sim_config import SimConfig
 
 
 def make_estimator(

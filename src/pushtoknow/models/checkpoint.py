@@ -18,8 +18,8 @@ import torch
 from pydantic import Field, field_validator
 
 from pushtoknow.common.camera import CameraModel
-from pushtoknow.common.config import Config
 from pushtoknow.common.errors import CheckpointError, first_line
+from pushtoknow.common.frozen_config import Config
 from pushtoknow.common.params import MIN_SIGMA_POINTS
 from pushtoknow.common.version import __version__
 from pushtoknow.filters.base import BeliefFilter, FilterConfig
@@ -180,7 +180,7 @@ class TrainedModel:
         inference pushes the same way. Models saved without them get the defaults; settings
         saved before testbed versions existed read back as version 1 (a simulator refuses
         them: such a model must be retrained)."""
-        from pushtoknow.testbed.config import SimConfig, stored_sim_config
+        from pushtoknow.testbed.sim_config import SimConfig, stored_sim_config
 
         raw = self.info.get("sim_config")
         return SimConfig() if raw is None else stored_sim_config(raw)

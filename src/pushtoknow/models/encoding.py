@@ -31,7 +31,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from pushtoknow.common.camera import CameraModel
-from pushtoknow.common.config import Config
+from pushtoknow.common.frozen_config import Config
 from pushtoknow.geometry.action_maps import ActionMapConfig
 from pushtoknow.geometry.warp import warp_affine_theta, warp_mask
 from pushtoknow.models.context import PushContext

@@ -18,8 +18,8 @@ from pydantic import Field, model_validator
 from torch import nn
 
 from pushtoknow.common.angles import wrap_angle
-from pushtoknow.common.config import Config
 from pushtoknow.common.errors import ShapeError
+from pushtoknow.common.frozen_config import Config
 from pushtoknow.filters.base import FilterConfig
 from pushtoknow.filters.constraints import StateConstraint, default_object_constraints
 from pushtoknow.filters.dual import DualFilter

@@ -17,8 +17,8 @@ from pydantic import model_validator
 from torch import nn
 
 from pushtoknow.common.angles import wrap_angle
-from pushtoknow.common.config import Config
 from pushtoknow.common.errors import ShapeError
+from pushtoknow.common.frozen_config import Config
 
 
 def _conv_stack(

@@ -22,11 +22,11 @@ import numpy as np
 from gymnasium import spaces
 
 from pushtoknow.geometry.affordances import mask_contour
-from pushtoknow.testbed.config import SimConfig
 from pushtoknow.testbed.executor import SimulatedExecutor, View
 from pushtoknow.testbed.object_refs import load_object_spec
 from pushtoknow.testbed.objects import ObjectSpec, build_catalogue
 from pushtoknow.testbed.push import Push
+from pushtoknow.testbed.sim_config import SimConfig
 
 MAX_DEVIATION = math.radians(5.0)
 SPEED_RANGE = (0.005, 0.5)  # m/s

@@ -15,10 +15,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from pushtoknow.common.camera import CameraModel
-from pushtoknow.testbed.config import SimConfig
 from pushtoknow.testbed.objects import ObjectSpec
 from pushtoknow.testbed.push import Push
 from pushtoknow.testbed.sim import PushRecord, PushSimulator
+from pushtoknow.testbed.sim_config import SimConfig
 
 
 @dataclass(frozen=True)

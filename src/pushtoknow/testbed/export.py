@@ -30,10 +30,10 @@ from shapely.validation import explain_validity
 
 from pushtoknow.common.errors import ExportError
 from pushtoknow.common.params import PARAM_NAMES
-from pushtoknow.testbed.config import PhysicsConfig
 from pushtoknow.testbed.objects import DEFAULT_HEIGHT, ObjectSpec
 from pushtoknow.testbed.scene import OBJECT_RGBA
 from pushtoknow.testbed.shapes import Footprint
+from pushtoknow.testbed.sim_config import PhysicsConfig
 
 ExportKind = Literal["mjcf", "urdf"]
 EXPORT_KINDS: tuple[str, ...] = ("mjcf", "urdf")

@@ -14,12 +14,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from pushtoknow.common.params import GRAVITY, ObjectParams
-from pushtoknow.testbed.config import SimConfig
 from pushtoknow.testbed.objects import ObjectSpec, resolve_shape
 from pushtoknow.testbed.push import Push
 from pushtoknow.testbed.scene import support_points
 from pushtoknow.testbed.shapes import footprint_from_shape
 from pushtoknow.testbed.sim import PushRecord, PushSimulator
+from pushtoknow.testbed.sim_config import SimConfig
 
 START_SHIFT = 5e-5  # m: the start-pose perturbation of the chaos probe (50 µm)
 START_TURN = math.radians(0.05)  # rad: and its rotation (0.05°)

@@ -8,8 +8,8 @@ from pathlib import Path
 
 import yaml
 
-from pushtoknow.common.config import read_utf8
 from pushtoknow.common.errors import ObjectSpecError, yaml_error_summary
+from pushtoknow.common.frozen_config import read_utf8
 from pushtoknow.testbed.objects import ObjectSpec, catalogue_object
 from pushtoknow.testbed.random_shapes import parse_random_ref
 

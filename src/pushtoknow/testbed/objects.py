@@ -34,7 +34,6 @@ from shapely.geometry import Point
 
 from pushtoknow.common.errors import ObjectSpecError
 from pushtoknow.common.params import CATALOGUE_GRID, PARAM_RANGES, ObjectParams
-from pushtoknow.testbed.config import CameraConfig, PadConfig
 from pushtoknow.testbed.shapes import (
     CATALOGUE_SHAPES,
     Footprint,
@@ -42,6 +41,7 @@ from pushtoknow.testbed.shapes import (
     footprint_from_shape,
     polygon_centroid,
 )
+from pushtoknow.testbed.sim_config import CameraConfig, PadConfig
 
 DEFAULT_HEIGHT = 0.013  # m, extrusion height (the MIT Push objects are 13 mm thick)
 # m: the CoM lies at least this far inside the footprint's convex hull. Any mass distribution

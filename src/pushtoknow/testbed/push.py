@@ -9,7 +9,7 @@ from typing import Literal
 
 import numpy as np
 
-from pushtoknow.testbed.config import PadConfig, PushConfig
+from pushtoknow.testbed.sim_config import PadConfig, PushConfig
 
 PAD_CLEARANCE = 1e-6  # m, clearance at the start: a release push starts touching, no impact
 

@@ -9,9 +9,9 @@ import numpy as np
 from shapely.geometry import MultiPoint, Point, Polygon, box
 
 from pushtoknow.common.params import GRAVITY
-from pushtoknow.testbed.config import SimConfig
 from pushtoknow.testbed.objects import ObjectSpec
 from pushtoknow.testbed.shapes import Footprint
+from pushtoknow.testbed.sim_config import SimConfig
 
 # Collision bits: supports ↔ table (1), object prism ↔ pad (2). The prism never touches the
 # table and the pad never touches the supports or the table.

@@ -16,10 +16,10 @@ import numpy as np
 
 from pushtoknow.common.params import GRAVITY, ObjectParams
 from pushtoknow.testbed import render as _render  # sets MUJOCO_GL before mujoco is imported
-from pushtoknow.testbed.config import SimConfig, check_testbed_version
 from pushtoknow.testbed.objects import ObjectSpec
 from pushtoknow.testbed.push import PAD_CLEARANCE, Push, speed_profile
 from pushtoknow.testbed.scene import MassLayout, build_mjcf, mass_layout
+from pushtoknow.testbed.sim_config import SimConfig, check_testbed_version
 
 mujoco = _render.mujoco
 

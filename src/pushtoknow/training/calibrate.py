@@ -32,7 +32,7 @@ import math
 import torch
 from pydantic import Field, field_validator, model_validator
 
-from pushtoknow.common.config import Config
+from pushtoknow.common.frozen_config import Config
 from pushtoknow.common.params import MIN_SIGMA_POINTS
 from pushtoknow.filters.tensor_shapes import expect_shape
 from pushtoknow.models.calibration import (

@@ -24,7 +24,7 @@ import torch
 from pydantic import Field
 
 from pushtoknow.common.angles import wrap_angle
-from pushtoknow.common.config import Config
+from pushtoknow.common.frozen_config import Config
 from pushtoknow.common.params import MIN_SIGMA_POINTS
 from pushtoknow.filters.base import BeliefFilter
 from pushtoknow.filters.gaussian import safe_cholesky

@@ -21,7 +21,7 @@ import torch
 from pydantic import Field
 
 from pushtoknow.common.camera import CameraModel
-from pushtoknow.common.config import Config
+from pushtoknow.common.frozen_config import Config
 from pushtoknow.models.networks import VisNet, VisNetConfig
 from pushtoknow.perception.visnet import net_inputs, visnet_measure
 

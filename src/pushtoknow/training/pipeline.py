@@ -25,8 +25,8 @@ from pathlib import Path
 import torch
 from pydantic import Field
 
-from pushtoknow.common.config import Config
 from pushtoknow.common.errors import DatasetError
+from pushtoknow.common.frozen_config import Config
 from pushtoknow.common.params import MIN_SIGMA_POINTS
 from pushtoknow.common.version import __version__
 from pushtoknow.datasets.generate import GENERATION_FILE
@@ -43,8 +43,8 @@ from pushtoknow.models.checkpoint import (
 )
 from pushtoknow.models.learned import LearnedModelsConfig
 from pushtoknow.perception.visnet import visnet_measure
-from pushtoknow.testbed.config import SimConfig, check_testbed_version
 from pushtoknow.testbed.push import PROFILES
+from pushtoknow.testbed.sim_config import SimConfig, check_testbed_version
 from pushtoknow.training.calibrate import SequenceCalibrationConfig, calibrate_evidence
 from pushtoknow.training.end_to_end import EndToEndConfig, evaluate_filter, train_end_to_end
 from pushtoknow.training.fit_visnet import VisNetTrainConfig, perturb, train_visnet

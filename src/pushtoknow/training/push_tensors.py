@@ -18,8 +18,8 @@ from pushtoknow.common.errors import DatasetError
 from pushtoknow.common.params import normalise_params
 from pushtoknow.datasets.shards import list_shards, open_shard
 from pushtoknow.perception.footprint import footprint_seen
-from pushtoknow.testbed.config import SimConfig, stored_sim_config
 from pushtoknow.testbed.push import Push, release_point
+from pushtoknow.testbed.sim_config import SimConfig, stored_sim_config
 
 
 @dataclass

@@ -20,7 +20,7 @@ import torch
 import torch.nn.functional as F
 from pydantic import Field
 
-from pushtoknow.common.config import Config
+from pushtoknow.common.frozen_config import Config
 from pushtoknow.models.context import PushContext, with_pad_track
 from pushtoknow.models.learned import LearnedModels
 from pushtoknow.training.push_tensors import PushTensors

@@ -8,8 +8,8 @@ from typing import Literal
 from pydantic import Field
 
 from pushtoknow.common.camera import CameraModel
-from pushtoknow.common.config import Config
 from pushtoknow.common.errors import TestbedVersionError
+from pushtoknow.common.frozen_config import Config
 
 
 class CameraConfig(Config):

@@ -6,7 +6,7 @@ import math
 
 from pydantic import Field
 
-from pushtoknow.common.config import Config
+from pushtoknow.common.frozen_config import Config
 from pushtoknow.identification.prior import CATALOGUE_PRIOR, PriorRanges
 
 
