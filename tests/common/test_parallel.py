@@ -63,6 +63,56 @@ def test_local_runner_keeps_job_order_and_reports_each_job():
         assert {r[1] for r in serial.map(_square, [1, 2])} == {os.getpid()}
 
 
+KILLED_PARENT = """
+import threading, time
+from pushtoknow.common.parallel import LocalRunner
+if __name__ == "__main__":
+    runner = LocalRunner(2)
+    threading.Thread(target=runner.map, args=(time.sleep, [120, 120]), daemon=True).start()
+    time.sleep(4)
+    print("running", flush=True)
+    time.sleep(120)
+"""
+
+
+def _children(pid: int) -> set[int]:
+    out = set()
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[1]) == pid:
+            out.add(int(stat.parent.name))
+    return out
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads /proc (Linux)")
+def test_pool_workers_end_with_a_killed_parent(tmp_path):
+    """A run killed by a signal (no cleanup runs) leaves no worker running its jobs."""
+    import subprocess
+    import sys
+    import time
+
+    script = tmp_path / "parent.py"
+    script.write_text(KILLED_PARENT)
+    proc = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout.readline().strip() == "running"
+        workers = _children(proc.pid)
+        assert len(workers) >= 2  # the two workers (and the resource tracker)
+    finally:
+        proc.kill()
+        proc.wait()
+    deadline = time.monotonic() + 15
+    while time.monotonic() < deadline and any(Path(f"/proc/{w}").exists() for w in workers):
+        time.sleep(0.2)
+    alive = [w for w in workers if Path(f"/proc/{w}").exists()]
+    for w in alive:
+        os.kill(w, 9)
+    assert not alive
+
+
 def test_runner_for_leaves_a_given_runner_open():
     with LocalRunner(2) as runner:
         with runner_for(runner) as same:

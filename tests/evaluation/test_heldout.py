@@ -32,3 +32,24 @@ def test_the_physics_run_replays_the_learned_runs_pushes(tmp_path_factory):
     # the pushes follow the seed: another seed, other pushes
     other = evaluate_heldout(run, ["catalogue:10"], 1, "uniform", 4)
     assert not np.array_equal(other.push_actions[:, 0], physics.push_actions[:, 0])
+
+
+def test_a_stopped_run_keeps_its_finished_objects(tmp_path_factory, monkeypatch):
+    """Each object's result is kept as it finishes; a rerun reads the finished ones back and
+    runs only the others, to the same run."""
+    from pushtoknow.evaluation import heldout
+
+    run = tiny_run(tmp_path_factory)
+    folder = tmp_path_factory.mktemp("finished")
+    args = (run, ["catalogue:10", "catalogue:11"], 1, "uniform", 3)
+    whole = evaluate_heldout(*args, finished=folder)
+    assert sorted(p.name for p in folder.iterdir()) == ["0.pkl", "1.pkl"]
+    (folder / "1.pkl").unlink()  # the run stopped before object 1 finished
+    ran = []
+    real = heldout._run_one
+    monkeypatch.setattr(heldout, "_run_one", lambda job: ran.append(job[1]) or real(job))
+    again = evaluate_heldout(*args, finished=folder)
+    assert ran == ["catalogue:11"]
+    np.testing.assert_array_equal(again.mean, whole.mean)
+    np.testing.assert_array_equal(again.push_actions, whole.push_actions)
+    assert again.ids == whole.ids

@@ -187,6 +187,47 @@ def test_misfit_noise_widens_the_posterior_where_the_replay_misses():
     assert np.trace(honest.cov) > np.trace(tight.cov)
 
 
+class SteppedPool(LinearPool):
+    """A linear replay with a step of `amp` noise units in every pose sample where the fit
+    coordinate u_1 exceeds `at`: a contact that begins one simulation step later."""
+
+    def __init__(self, a, b, at: float, amp: float):
+        super().__init__(a, b)
+        self.at, self.amp = at, amp
+
+    def run_each(self, scene, phis, tracks):
+        out = super().run_each(scene, phis, tracks)
+        tmat = fit_transform()
+        for phi, pushes in zip(np.atleast_2d(phis), out, strict=True):
+            if (tmat @ normalise_params(phi))[1] > self.at:
+                for sim in pushes:
+                    sim[:, 2:] += self.amp * SIGMAS[2:]
+        return out
+
+
+def test_posterior_linearisation_counts_a_replays_step_as_noise_not_information():
+    """Nothing in the linear replay reveals u_1, but a step in it lies just beyond the optimum,
+        inside the forward difference: that difference reads the step as a steep slope and the
+        update grows sure of u_1; linearised across the posterior's spread, the update is the Kalman
+    update of the linear replay."""
+    a, b, mean, cov, track, scene = problem(8)
+    a[:, 1] = 0.0
+    y = np.column_stack([track.force, track.pose])
+    optimum, want_cov = kalman(a, b, mean, cov, y)
+    cfg = EXACT.model_copy(update={"fd_steps": (0.01, 0.4, 0.02, 0.02, 0.15)})
+    at = optimum[1] + 0.2
+    assert np.sqrt(want_cov[1, 1]) < 0.2  # no sigma point reaches the step
+    pool = SteppedPool(a, b, at, amp=5.0)
+    forward = iterated_update(
+        mean, cov, track, scene, pool, SIGMAS, cfg.model_copy(update={"linearisation_rounds": 0})
+    )
+    assert forward.cov[1, 1] < 0.1 * want_cov[1, 1]
+    linearised = iterated_update(mean, cov, track, scene, pool, SIGMAS, cfg)
+    np.testing.assert_allclose(linearised.cov, want_cov, rtol=1e-5, atol=1e-12)
+    # the descent's own forward differences still see the step: its mean within the spread
+    assert np.all(np.abs(linearised.mean - optimum) < np.sqrt(np.diag(want_cov)))
+
+
 def test_expected_information_is_the_gaussian_entropy_reduction():
     a, b, mean, cov, track, scene = problem(6)
     got = expected_information(mean, cov, [track], scene, LinearPool(a, b), SIGMAS, EXACT)

@@ -80,6 +80,29 @@ def _call(fn: Callable[[Any], Any], initializer: Initializer | None, job: Any) -
     return fn(job)
 
 
+PR_SET_PDEATHSIG = 1  # prctl(2): the signal a process gets when its parent ends
+
+
+def _start_worker(parent: int, initializer: Initializer | None) -> None:
+    """A pool worker's start: it ends with the process that started it (on Linux, by
+    PR_SET_PDEATHSIG; a pool whose parent is killed by a signal would otherwise keep its
+    workers running their jobs), then `initializer()`."""
+    import signal
+    import sys
+
+    if sys.platform.startswith("linux"):
+        import ctypes
+
+        try:
+            ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
+        except (OSError, AttributeError):  # no prctl: workers end when their queue closes
+            pass
+        if os.getppid() != parent:  # the parent ended before the signal was armed
+            os._exit(1)
+    if initializer is not None:
+        initializer()
+
+
 class LocalRunner(TaskRunner):
     """A spawn process pool of `workers` processes (created on first use, kept across calls with
     the same initializer), or this process when workers ≤ 1 or there is a single job."""
@@ -104,7 +127,8 @@ class LocalRunner(TaskRunner):
             self._pool = ProcessPoolExecutor(
                 self.workers,
                 mp_context=multiprocessing.get_context("spawn"),  # no forked MuJoCo/GL state
-                initializer=initializer,
+                initializer=_start_worker,
+                initargs=(os.getpid(), initializer),
             )
             self._pool_initializer = initializer
         futures: dict[Future, int] = {self._pool.submit(fn, job): i for i, job in enumerate(jobs)}

@@ -7,7 +7,10 @@ parallel processes, each seeded by (seed, object id), so results do not depend o
 
 from __future__ import annotations
 
+import os
+import pickle
 from dataclasses import asdict, dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -150,6 +153,7 @@ def evaluate_heldout(
     profiles: tuple[str, ...] = ("constant",),
     estimator: str = LEARNED_ESTIMATOR,
     push_actions: np.ndarray | None = None,
+    finished: Path | None = None,
 ) -> HeldoutRun:
     """Run inference on each object (`catalogue:ID` or spec strings) on `workers` (local
     processes or a `TaskRunner`); `profiles`: the speed profiles the policy may use
@@ -159,7 +163,10 @@ def evaluate_heldout(
     every estimator (their own random stream, `common.random`), but the uniform policy's choice
     depends on the estimator's orientation estimate (bearings in the object frame), so
     `push_actions` (N, K, 5), another run's pushes, makes the run execute exactly those pushes
-    instead of the policy's (the policy's name is then a label)."""
+    instead of the policy's (the policy's name is then a label). `finished`: a folder keeping
+    each object's result as it finishes (`<index>.pkl`), read back instead of rerunning it, so
+    a run stopped for any reason loses no finished object; the caller names one folder per
+    run's settings and removes it once the whole run is saved."""
     jobs = [
         (
             str(model_path),
@@ -174,8 +181,22 @@ def evaluate_heldout(
         )
         for i, o in enumerate(objects)
     ]
+    done = _finished_objects(finished, len(jobs))
+    todo = [i for i in range(len(jobs)) if i not in done]
+    for _ in range(len(jobs) - len(todo)):
+        if progress:
+            progress()
+
+    def on_done(j: int, result: dict) -> None:
+        if finished is not None:
+            _keep_finished(finished, todo[j], result)
+        if progress:
+            progress()
+
     with runner_for(workers) as runner:
-        out = runner.map(_run_one, jobs, on_done=(lambda *_: progress()) if progress else None)
+        fresh = runner.map(_run_one, [jobs[i] for i in todo], on_done=on_done)
+    done.update(zip(todo, fresh))
+    out = [done[i] for i in range(len(jobs))]
     return HeldoutRun(
         mean=np.stack([r["mean"] for r in out]),
         std=np.stack([r["std"] for r in out]),
@@ -191,6 +212,30 @@ def evaluate_heldout(
         lower=np.stack([r["lower"] for r in out]),
         upper=np.stack([r["upper"] for r in out]),
     )
+
+
+def _finished_objects(folder: Path | None, n: int) -> dict[int, dict]:
+    """{index: result} of the objects a stopped run of the same settings finished (`folder`'s
+    `<index>.pkl`; a file that cannot be read is run again)."""
+    out: dict[int, dict] = {}
+    if folder is None or not folder.is_dir():
+        return out
+    for i in range(n):
+        path = folder / f"{i}.pkl"
+        if path.is_file():
+            try:
+                out[i] = pickle.loads(path.read_bytes())
+            except Exception:  # a damaged file: that object runs again
+                continue
+    return out
+
+
+def _keep_finished(folder: Path, index: int, result: dict) -> None:
+    """Write one object's result to `folder`/<index>.pkl atomically."""
+    folder.mkdir(parents=True, exist_ok=True)
+    tmp = folder / f"{index}.pkl.tmp"
+    tmp.write_bytes(pickle.dumps(result))
+    os.replace(tmp, folder / f"{index}.pkl")
 
 
 @dataclass(frozen=True)

@@ -56,6 +56,7 @@ import hashlib
 import json
 import os
 import platform
+import shutil
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
@@ -274,10 +275,17 @@ def _cache_key(
     if estimator != LEARNED_ESTIMATOR:
         settings.append({"estimator": estimator})
         if estimator == PHYSICS:
-            from pushtoknow.identification import fit, prior, recursive, replay, residuals
+            from pushtoknow.identification import (
+                fit,
+                optimise,
+                prior,
+                recursive,
+                replay,
+                residuals,
+            )
             from pushtoknow.inference import physics_filter
 
-            for module in (physics_filter, recursive, residuals, replay, fit, prior):
+            for module in (physics_filter, recursive, optimise, residuals, replay, fit, prior):
                 h.update(Path(module.__file__).read_bytes())
     if push_actions is not None:
         h.update(np.ascontiguousarray(push_actions, dtype=np.float64).tobytes())
@@ -373,6 +381,7 @@ def _inference_run(
     cached = _load_run(cache, key)
     if cached is not None and not (need_pushes and cached.pushes is None):
         return cached
+    finished = cache.parent / f"{cache.stem}.{key}.finished"  # objects done so far
     run = evaluate_heldout(
         model,
         objects,
@@ -385,8 +394,10 @@ def _inference_run(
         profiles=profiles,
         estimator=estimator,
         push_actions=push_actions,
+        finished=finished,
     )
     _save_run(cache, key, run)
+    shutil.rmtree(finished, ignore_errors=True)
     return run
 
 

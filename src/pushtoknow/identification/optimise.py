@@ -129,6 +129,37 @@ def central_jacobian(residuals: Residuals, u: np.ndarray, fd_steps: np.ndarray) 
     return ((rj[:d] - rj[d:]) / (2 * fd_steps[:, None])).T
 
 
+def linearised_information(
+    residuals: Residuals,
+    u: np.ndarray,
+    r: np.ndarray,
+    cov: np.ndarray,
+    spread: float = 1.0,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The statistical linearisation of a push's data residuals about the optimum u (D,)
+    (residuals r (n,) there, noise units) across a belief's spread cov (D, D): sigma points
+    u ± `spread`·L e_j (L = chol(cov)) replayed. Returns the Jacobian (n, D) of their central
+    differences and each residual's linearisation error (n,), the mean over j of the squared
+    departure of the midpoint (y⁺ + y⁻)/2 from r (noise units²): what the replay's jitter and
+    curvature within the belief's own spread add to each residual's variance.
+
+    One round of (iterated) posterior linearisation: a forward difference at one point reads a
+    replay's step-to-step jitter (a contact that begins one step later) as information. The
+    first round spreads the points across the belief before the push, where the jitter
+    averages out and curvature counts as noise, later rounds across the last posterior; a
+    round started at a posterior already too sure would keep its points inside the jitter's
+    scale, its steps read as slopes again. On a linear replay every round is exact (error 0)."""
+    dim = len(u)
+    chol = np.linalg.cholesky(cov + 1e-15 * np.eye(dim) * max(np.trace(cov), 1e-300))
+    steps = spread * chol.T  # row j: spread · L e_j
+    y = residuals(np.concatenate([u[None] + steps, u[None] - steps]))[:, : len(r)]
+    y_plus, y_minus = y[:dim], y[dim:]
+    jl = (y_plus - y_minus) / (2.0 * spread)  # (D, n): (J L)ᵀ
+    jac = np.linalg.solve(chol.T, jl).T
+    error = np.mean((0.5 * (y_plus + y_minus) - r[None]) ** 2, axis=0)
+    return jac, error
+
+
 def levenberg_marquardt(
     objective: Objective,
     u: np.ndarray,

@@ -10,8 +10,10 @@ log m at fixed μ·m, c_x, c_y, log I_z, normalised). After a push, the update i
 r the push's replayed force and pose track against the observed one in noise units (ρ Huber
 on the force), ū, P the belief before the push; Levenberg–Marquardt steps with forward-difference
 Jacobians from batched replays. The posterior covariance is the Laplace one at that point
-(`fit.laplace_posterior`): directions the push carries less than `flat_information` times the
-prior's information about keep the prior's width and mean. Each channel group's noise is raised
+(`fit.laplace_posterior`), its Jacobian statistically linearised across the belief's spread
+(`optimise.linearised_information`: a replay's jitter counts as noise, not information):
+directions the push carries less than `flat_information` times the prior's information about
+keep the prior's width and mean. Each channel group's noise is raised
 to the push's own misfit where the replay cannot reproduce it (a perceived outline or pose track
 the replay only approximates), counted by its effective number of samples, so model error
 widens the intervals instead of narrowing them.
@@ -37,7 +39,12 @@ from pushtoknow.identification.fit import (
     misfit_noise_scale,
     without_blind,
 )
-from pushtoknow.identification.optimise import DescentSettings, Objective, levenberg_marquardt
+from pushtoknow.identification.optimise import (
+    DescentSettings,
+    Objective,
+    levenberg_marquardt,
+    linearised_information,
+)
 from pushtoknow.identification.prior import CATALOGUE_PRIOR, PriorRanges
 from pushtoknow.identification.replay import PushTrack, ReplayScene, RolloutPool
 from pushtoknow.identification.residuals import (
@@ -146,6 +153,18 @@ class PhysicsFilterConfig(Config):
     )
     look_ahead_candidates: int = Field(
         8, ge=1, description="candidates an active policy scores with replays"
+    )
+    linearisation_rounds: int = Field(
+        2,
+        ge=0,
+        description="rounds of posterior linearisation of the push's information "
+        "(`linearised_information`): the replay's Jacobian by central differences across the "
+        "belief's spread (the first round the belief before the push, then the last round's "
+        "posterior), its jitter and curvature there added to the noise (0: the "
+        "forward-difference Jacobian at the optimum)",
+    )
+    linearisation_spread: float = Field(
+        1.0, gt=0, description="posterior standard deviations to each side of the optimum"
     )
 
 
@@ -289,18 +308,30 @@ def _update_once(
         raised = np.maximum(misfit_noise_scale(r[:n].reshape(-1, 5), res.push_lengths), 1.0)
     row_scale = np.concatenate([np.tile(1.0 / raised, n // 5), np.ones(len(r) - n)])
     r_w = r * row_scale
-    jac_w = jac * row_scale[:, None]
     w = np.concatenate([huber_weights(r_w[:n], cfg.huber, res.robust), np.ones(len(r) - n)])
-    h_data = jac_w[:n].T @ (w[:n, None] * jac_w[:n])
     poor = chi2 > cfg.poor_fit_chi2
-    if is_quasi_static(track, scene.sim_config.tactile.rate_hz) or poor:
-        # a quasi-static push reveals neither m at fixed μ·m nor I_z (docs/DESIGN.md §10); a
-        # push the replay cannot reproduce reads them off accelerations and spin-downs it
-        # does not match
-        h_data = without_blind(h_data)
-    post, lam_d, vecs, flat = laplace_posterior(
-        h_data, step, cov, cfg.flat_information, cfg.information_scale
-    )
+    # a quasi-static push reveals neither m at fixed μ·m nor I_z (docs/DESIGN.md §10); a push
+    # the replay cannot reproduce reads them off accelerations and spin-downs it does not match
+    blind = is_quasi_static(track, scene.sim_config.tactile.rate_hz) or poor
+
+    def posterior(jac_d: np.ndarray, extra_var: np.ndarray | float = 0.0):
+        """The Laplace posterior of data Jacobian jac_d (n, D), each residual's variance in
+        noise units (1 + extra_var) raised by the misfit."""
+        scale2 = row_scale[:n] ** 2
+        w_d = w[:n] * scale2 / (1.0 + extra_var * scale2)
+        h_data = jac_d.T @ (w_d[:, None] * jac_d)
+        if blind:
+            h_data = without_blind(h_data)
+        return laplace_posterior(h_data, step, cov, cfg.flat_information, cfg.information_scale)
+
+    post, lam_d, vecs, flat = posterior(jac[:n])
+    spread = cov  # the first round across the belief before the push, then its posterior's
+    for _ in range(cfg.linearisation_rounds):
+        jac_s, jitter = linearised_information(
+            res.residuals, u, r[:n], spread, cfg.linearisation_spread
+        )
+        post, lam_d, vecs, flat = posterior(jac_s, jitter)
+        spread = post
     # along a direction the push does not reveal, the mean stays the prior's
     chol = np.linalg.cholesky(cov)
     w_u = np.linalg.solve(chol, u - mean)
