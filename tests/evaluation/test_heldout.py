@@ -50,6 +50,8 @@ def test_a_stopped_run_keeps_its_finished_objects(tmp_path_factory, monkeypatch)
     monkeypatch.setattr(heldout, "_run_one", lambda job: ran.append(job[1]) or real(job))
     again = evaluate_heldout(*args, finished=folder)
     assert ran == ["catalogue:11"]
+    kept = {p.name: heldout.pickle.loads(p.read_bytes())["ref"] for p in folder.iterdir()}
+    assert kept == {"0.pkl": "catalogue:10", "1.pkl": "catalogue:11"}
     np.testing.assert_array_equal(again.mean, whole.mean)
     np.testing.assert_array_equal(again.push_actions, whole.push_actions)
     assert again.ids == whole.ids

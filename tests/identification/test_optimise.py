@@ -169,3 +169,26 @@ def test_any_linear_map_problem_is_solved_and_never_made_worse(seed, dim, broyde
     got = levenberg_marquardt(objective, u0, r0, lm)
     assert got.cost <= objective.cost(r0, u0)
     np.testing.assert_allclose(got.u, want, rtol=1e-7, atol=1e-8)
+
+
+def test_linearised_information_on_a_quadratic_replay():
+    """y_k = Σ_j b_kj u_j + Σ_j a_kj u_j² about u = 0 with cov = L Lᵀ (L diagonal): the
+    central differences at ±L e_j give b exactly, and each residual's error is the mean over j
+    of the midpoint's departure, (a_kj L_jj²)²."""
+    from pushtoknow.identification.optimise import linearised_information
+
+    rng = np.random.default_rng(3)
+    a, b = rng.normal(size=(7, 4)), rng.normal(size=(7, 4))
+    sd = np.array([0.5, 1.0, 2.0, 0.1])
+
+    def residuals(us):
+        return us @ b.T + (us**2) @ a.T
+
+    jac, error = linearised_information(residuals, np.zeros(4), np.zeros(7), np.diag(sd**2))
+    np.testing.assert_allclose(jac, b, atol=1e-12)
+    np.testing.assert_allclose(error, np.mean((a * sd**2) ** 2, axis=1), rtol=1e-10)
+    # a linear replay: exact Jacobian, no error, whatever the spread
+    jac, error = linearised_information(lambda us: us @ b.T, np.ones(4), np.ones(4) @ b.T,
+                                        np.diag(sd**2), spread=3.0)  # fmt: skip
+    np.testing.assert_allclose(jac, b, atol=1e-12)
+    np.testing.assert_allclose(error, 0.0, atol=1e-20)

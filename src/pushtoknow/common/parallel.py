@@ -84,9 +84,11 @@ PR_SET_PDEATHSIG = 1  # prctl(2): the signal a process gets when its parent ends
 
 
 def _start_worker(parent: int, initializer: Initializer | None) -> None:
-    """A pool worker's start: it ends with the process that started it (on Linux, by
+    """A pool worker's start: it ends with the thread that started it (on Linux, by
     PR_SET_PDEATHSIG; a pool whose parent is killed by a signal would otherwise keep its
-    workers running their jobs), then `initializer()`."""
+    workers running their jobs), then `initializer()`. Workers start in the thread that first
+    submits to the pool: a `LocalRunner` is meant to be used from one long-lived thread (the
+    main one)."""
     import signal
     import sys
 

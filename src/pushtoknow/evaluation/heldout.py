@@ -118,6 +118,7 @@ def _run_one(args) -> dict:
             res.records, camera, pose_fn=lambda _: np.asarray(next(poses), float)
         ),
         "id": spec.name if object_ref.lstrip().startswith("{") else object_ref,
+        "ref": object_ref,
         "mean": np.stack([e.mean for e in rows]),
         "std": np.stack([e.std for e in rows]),
         "lower": np.stack([e.interval()[0] for e in rows]),
@@ -181,7 +182,7 @@ def evaluate_heldout(
         )
         for i, o in enumerate(objects)
     ]
-    done = _finished_objects(finished, len(jobs))
+    done = _finished_objects(finished, [job[1] for job in jobs])
     todo = [i for i in range(len(jobs)) if i not in done]
     for _ in range(len(jobs) - len(todo)):
         if progress:
@@ -193,9 +194,10 @@ def evaluate_heldout(
         if progress:
             progress()
 
-    with runner_for(workers) as runner:
-        fresh = runner.map(_run_one, [jobs[i] for i in todo], on_done=on_done)
-    done.update(zip(todo, fresh))
+    if todo:
+        with runner_for(workers) as runner:
+            fresh = runner.map(_run_one, [jobs[i] for i in todo], on_done=on_done)
+        done.update(zip(todo, fresh))
     out = [done[i] for i in range(len(jobs))]
     return HeldoutRun(
         mean=np.stack([r["mean"] for r in out]),
@@ -214,19 +216,22 @@ def evaluate_heldout(
     )
 
 
-def _finished_objects(folder: Path | None, n: int) -> dict[int, dict]:
-    """{index: result} of the objects a stopped run of the same settings finished (`folder`'s
-    `<index>.pkl`; a file that cannot be read is run again)."""
+def _finished_objects(folder: Path | None, refs: list[str]) -> dict[int, dict]:
+    """{index: result} of the objects of `refs` a stopped run of the same settings finished
+    (`folder`'s `<index>.pkl`; a file that cannot be read, or holds another object, is run
+    again)."""
     out: dict[int, dict] = {}
     if folder is None or not folder.is_dir():
         return out
-    for i in range(n):
+    for i, ref in enumerate(refs):
         path = folder / f"{i}.pkl"
         if path.is_file():
             try:
-                out[i] = pickle.loads(path.read_bytes())
+                result = pickle.loads(path.read_bytes())
             except Exception:  # a damaged file: that object runs again
                 continue
+            if result.get("ref") == ref:
+                out[i] = result
     return out
 
 

@@ -143,7 +143,9 @@ def linearised_information(
     departure of the midpoint (y⁺ + y⁻)/2 from r (noise units²): what the replay's jitter and
     curvature within the belief's own spread add to each residual's variance.
 
-    One round of (iterated) posterior linearisation: a forward difference at one point reads a
+    One round of (iterated) posterior linearisation, with two simplifications: the points lie
+    at ±1 standard deviation (the cubature rule's at ±√D would weigh curvature more), and
+    cross terms between directions are not sampled. A forward difference at one point reads a
     replay's step-to-step jitter (a contact that begins one step later) as information. The
     first round spreads the points across the belief before the push, where the jitter
     averages out and curvature counts as noise, later rounds across the last posterior; a

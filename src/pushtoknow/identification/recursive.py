@@ -11,15 +11,17 @@ r the push's replayed force and pose track against the observed one in noise uni
 on the force), ū, P the belief before the push; Levenberg–Marquardt steps with forward-difference
 Jacobians from batched replays. The posterior covariance is the Laplace one at that point
 (`fit.laplace_posterior`), its Jacobian statistically linearised across the belief's spread
-(`optimise.linearised_information`: a replay's jitter counts as noise, not information):
-directions the push carries less than `flat_information` times the prior's information about
-keep the prior's width and mean. Each channel group's noise is raised
+(`optimise.linearised_information`, so that a replay's jitter counts as noise rather than
+information). Directions the push carries less than `flat_information` times the prior's
+information about keep the prior's width and mean. Each channel group's noise is raised
 to the push's own misfit where the replay cannot reproduce it (a perceived outline or pose track
 the replay only approximates), counted by its effective number of samples, so model error
 widens the intervals instead of narrowing them.
 
-`expected_information` scores candidate pushes by the entropy the same update would remove:
-½ log det(I + P^½ JᵀWJ P^½) with J the candidate's replay Jacobian at the belief's mean.
+`expected_information` scores candidate pushes by the entropy an update would remove,
+½ log det(I + P^½ JᵀWJ P^½), with J the candidate's forward-difference replay Jacobian at the
+belief's mean (not linearised across the belief as the update is: a ranking, at six replays a
+candidate).
 """
 
 from __future__ import annotations
@@ -274,12 +276,13 @@ def _update_once(
         fd_steps=tuple(fd),
         trials=3,
         broyden_steps=cfg.broyden_steps,
-        final_jacobian=True,
+        final_jacobian=cfg.linearisation_rounds == 0,  # else the rounds replace it
     )
 
     def descend(u, r, c):
         """Levenberg–Marquardt (`optimise.levenberg_marquardt`) from u (residuals r, objective
-        c) → (u, r, c, jac, step), jac exact (forward differences) at the returned u."""
+        c) → (u, r, c, jac, step), jac exact (forward differences) at the returned u (None
+        when the linearisation rounds replace it)."""
         nonlocal iterations
         d = levenberg_marquardt(objective, u, r, descent, c)
         iterations += d.iterations
@@ -324,7 +327,9 @@ def _update_once(
             h_data = without_blind(h_data)
         return laplace_posterior(h_data, step, cov, cfg.flat_information, cfg.information_scale)
 
-    post, lam_d, vecs, flat = posterior(jac[:n])
+    if cfg.linearisation_rounds == 0:
+        assert jac is not None
+        post, lam_d, vecs, flat = posterior(jac[:n])
     spread = cov  # the first round across the belief before the push, then its posterior's
     for _ in range(cfg.linearisation_rounds):
         jac_s, jitter = linearised_information(
