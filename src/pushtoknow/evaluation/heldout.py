@@ -7,7 +7,6 @@ parallel processes, each seeded by (seed, object id), so results do not depend o
 
 from __future__ import annotations
 
-import os
 import pickle
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -15,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from pushtoknow.baselines.random_forest import features_from_records
+from pushtoknow.common.files import atomic_write
 from pushtoknow.common.parallel import Workers, runner_for
 from pushtoknow.common.params import product_moments
 from pushtoknow.evaluation.metrics import coverage, nrmse, product_nrmse
@@ -184,13 +184,12 @@ def evaluate_heldout(
     ]
     done = _finished_objects(finished, [job[1] for job in jobs])
     todo = [i for i in range(len(jobs)) if i not in done]
-    for _ in range(len(jobs) - len(todo)):
-        if progress:
-            progress()
+    for _ in done if progress else ():
+        progress()
 
     def on_done(j: int, result: dict) -> None:
         if finished is not None:
-            _keep_finished(finished, todo[j], result)
+            atomic_write(finished / f"{todo[j]}.pkl", pickle.dumps(result))
         if progress:
             progress()
 
@@ -233,14 +232,6 @@ def _finished_objects(folder: Path | None, refs: list[str]) -> dict[int, dict]:
             if result.get("ref") == ref:
                 out[i] = result
     return out
-
-
-def _keep_finished(folder: Path, index: int, result: dict) -> None:
-    """Write one object's result to `folder`/<index>.pkl atomically."""
-    folder.mkdir(parents=True, exist_ok=True)
-    tmp = folder / f"{index}.pkl.tmp"
-    tmp.write_bytes(pickle.dumps(result))
-    os.replace(tmp, folder / f"{index}.pkl")
 
 
 @dataclass(frozen=True)
