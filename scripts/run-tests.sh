@@ -7,4 +7,4 @@ export MUJOCO_GL="${MUJOCO_GL:-egl}"
 .venv/bin/ruff check src tests
 .venv/bin/ruff format --check src tests
 .venv/bin/mypy src/pushtoknow/filters src/pushtoknow/models  # the typed functional core
-exec .venv/bin/python -m pytest -n 2 --dist loadfile "$@"
+exec .venv/bin/python -m pytest -n 2 --dist loadfile --durations=15 "$@"

@@ -191,6 +191,10 @@ def test_json_keys_truth_and_skipped_push(bench):
     assert "no contact" in o["skipped"][0]["reason"]
     assert o["truth"]["mass"] == RECT1_MASS and o["truth"]["com_x"] == 0.0
     assert o["truth"]["friction"] == pytest.approx(MU, rel=0.05)  # measured, pure translation
+    ref = o["friction_reference"]
+    assert [p["file"] for p in ref["pushes"]] == o["files"]
+    # the pooled pure translations' μ is a mean of pushes' means: never above their largest
+    assert ref["lower_bound"] >= o["truth"]["friction"] * (1 - 1e-12)
     assert set(o["methods"]) == {"vt-addf", "prior", "forest"}
     assert o["prior_of"] == "vt-addf"
     for rows in o["methods"].values():
@@ -253,6 +257,7 @@ def test_physics_row_on_one_push(mit_dir, run_dir):
     assert section.startswith("## Real objects (`evaluate-real`)")
     assert "    pushtoknow evaluate-real DIR" in section and "| abs:rect1 | m (kg) |" in section
     assert "abs:rect1: physics filter, 1 updates, reduced χ²" in section
+    assert "abs:rect1: its pushes' mean contact force / (m g) reaches" in section
 
 
 # ------------------------------------------------------------------------------------------

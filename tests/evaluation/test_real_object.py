@@ -111,6 +111,8 @@ def test_friction_reference_rule_on_synthetic_records():
     assert [p["pure_translation"] for p in ref["pushes"]] == [True, False]
     assert ref["pushes"][1]["mu_contact_phase"] == pytest.approx(0.6)
     assert ref["pushes"][0]["rotation_deg"] == pytest.approx(1.0)
+    # the turning push's force exceeds the pure translation's: μ ≥ 0.6 bounds the reference
+    assert ref["lower_bound"] == pytest.approx(0.6) and ref["lower_bound_push"] == 1
     # A bounce inside the contact phase counts as F = 0 (time average), so μ drops by 1/5.
     ref = friction_reference([_record(mu_m_g, 0.0, dropout=4)], m)
     assert ref["value"] == pytest.approx(0.3 * 4 / 5)
@@ -124,6 +126,9 @@ def test_friction_reference_rule_on_synthetic_records():
     )
     assert ref["value"] is None
     assert ref["pushes"][1]["mu_contact_phase"] is None
+    assert ref["lower_bound"] == pytest.approx(0.3) and ref["lower_bound_push"] == 0
+    no_contact = friction_reference([_record(1.0, 0.0, contact=None)], m)
+    assert no_contact["lower_bound"] is None and no_contact["lower_bound_push"] is None
     # A glancing push that moved the object 2 mm is no friction reference (it did not slide
     # far enough to balance the full friction); the 5 cm one is.
     glancing = _record(0.1 * mu_m_g, 0.0)

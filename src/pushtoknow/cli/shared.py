@@ -101,7 +101,11 @@ def command_line(ctx: typer.Context) -> str:
     import enum as _enum
     import shlex
 
-    parts = ["pushtoknow", *ctx.command_path.split()[1:]]
+    names, level = [], ctx  # the subcommands' names: the program's own (`python -m …`) left out
+    while level.parent is not None:
+        names.append(level.info_name)
+        level = level.parent
+    parts = ["pushtoknow", *reversed(names)]
     for p in ctx.command.params:
         value = ctx.params.get(p.name)
         if p.name in REPORT_OPTIONS or value is None or value == p.default or value == []:

@@ -229,6 +229,8 @@ def _mit_object(
             return None
         obj = mit_object(shape)
         fric = friction_reference(records, obj.mass)  # every accepted push
+        for row, (p, _) in zip(fric["pushes"], accepted, strict=True):
+            row["file"] = str(p.relative_to(root))
         used = accepted[:max_pushes] if max_pushes else accepted
         image_records = None
         if train_speed is not None:
@@ -632,6 +634,17 @@ class RealBenchmark:
                     f"- {key}: physics filter, {len(ups)} updates, reduced χ² "
                     f"{min(chi2):.1f}–{max(chi2):.1f}, {poor} poor fits (m at fixed μ·m and "
                     "I_z then keep the prior)"
+                )
+        for key, o in self.objects.items():
+            ref, mu = o.get("friction_reference") or {}, o["truth"]["friction"]
+            if ref.get("lower_bound") is not None and mu is not None:
+                i = ref["lower_bound_push"]
+                push = Path(ref["pushes"][i].get("file", f"push {i}")).name
+                fits.append(
+                    f"- {key}: its pushes' mean contact force / (m g) reaches "
+                    f"{ref['lower_bound']:.3f} ({push}), a lower bound of μ (a quasi-static "
+                    f"push's force is at most μ m g), against the μ taken as truth, {mu:.3f}"
+                    + (": one μ does not describe these pushes" * (ref["lower_bound"] > 1.05 * mu))
                 )
         for key, o in self.objects.items():
             for reason in (o.get("vt-addf") or {}).get("outside_training", []):

@@ -276,7 +276,10 @@ def friction_reference(
 
     Returns {"value": μ or None, "rule": text, "pushes": [{"rotation_deg", "travel_m",
     "pure_translation", "mu_contact_phase" (that push's own mean ‖F‖/(m·g), None without
-    contact), "contact_samples"}]}.
+    contact), "contact_samples"}], "lower_bound": the largest "mu_contact_phase" (None without
+    contact), "lower_bound_push": its index}. A quasi-static push's force is at most μ·m·g
+    (the limit surface's largest force is the pure translation's), so every push bounds μ from
+    below, whatever it turned: a bound above "value" says one μ does not describe the pushes.
     """
     per, pooled = [], []
     for rec in records:
@@ -301,7 +304,15 @@ def friction_reference(
         f"with |rotation| < {max_rotation_deg} deg that moved the object ≥ {min_travel * 1e3:g} "
         "mm (pure translations that slid), samples pooled"
     )
-    return {"value": value, "rule": rule, "pushes": per}
+    seen = [(p["mu_contact_phase"], i) for i, p in enumerate(per) if p["mu_contact_phase"]]
+    bound, at = max(seen) if seen else (None, None)
+    return {
+        "value": value,
+        "rule": rule,
+        "pushes": per,
+        "lower_bound": bound,
+        "lower_bound_push": at,
+    }
 
 
 # ============================================================================================
