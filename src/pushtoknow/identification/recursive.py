@@ -311,9 +311,8 @@ def _update_once(
     raised = np.ones(5)
     if cfg.misfit_noise:
         raised = np.maximum(misfit_noise_scale(r[:n].reshape(-1, 5), res.push_lengths), 1.0)
-    row_scale = np.concatenate([np.tile(1.0 / raised, n // 5), np.ones(len(r) - n)])
-    r_w = r * row_scale
-    w = np.concatenate([huber_weights(r_w[:n], cfg.huber, res.robust), np.ones(len(r) - n)])
+    data_scale = np.tile(1.0 / raised, n // 5)  # (n,): each data residual's misfit scaling
+    w_huber = huber_weights(r[:n] * data_scale, cfg.huber, res.robust)
     poor = chi2 > cfg.poor_fit_chi2
     # a quasi-static push reveals neither m at fixed μ·m nor I_z (docs/DESIGN.md §10); a push
     # the replay cannot reproduce reads them off accelerations and spin-downs it does not match
@@ -322,8 +321,8 @@ def _update_once(
     def posterior(jac_d: np.ndarray, extra_var: np.ndarray | float = 0.0):
         """The Laplace posterior of data Jacobian jac_d (n, D), each residual's variance in
         noise units (1 + extra_var) raised by the misfit."""
-        scale2 = row_scale[:n] ** 2
-        w_d = w[:n] * scale2 / (1.0 + extra_var * scale2)
+        scale2 = data_scale**2
+        w_d = w_huber * scale2 / (1.0 + extra_var * scale2)
         h_data = jac_d.T @ (w_d[:, None] * jac_d)
         if blind:
             h_data = without_blind(h_data)
