@@ -89,6 +89,31 @@ def test_the_estimator_is_chosen_by_name(model):
     est.close()
 
 
+def test_the_split_floor_widens_m_and_mu_not_their_product_once_pushes_were_seen(model):
+    """`split_floor` adds its variance to log m and log μ at fixed log μ·m, only once a push was
+    seen; the CoM floor adds to the CoM alone."""
+    from pushtoknow.common.params import space_scale
+    from pushtoknow.identification.recursive import PhysicsFilterConfig
+
+    def estimator(**floors):
+        cfg = PhysicsFilterConfig(split_floor=0.0, com_floor=0.0, inertia_floor=0.0)
+        return PhysicsFilterEstimator(model, filter_config=cfg.model_copy(update=floors))
+
+    plain, split, com = estimator(), estimator(split_floor=0.3), estimator(com_floor=4e-3)
+    np.testing.assert_allclose(split.estimate(0).belief.cov_norm, plain.estimate(0).belief.cov_norm)
+    for est in (plain, split, com):
+        est.updates.append(None)  # a push was seen: the floors apply
+    s = space_scale()
+    base = plain.estimate(1).belief.cov_norm * np.outer(s, s)  # log / SI units
+    wide = split.estimate(1).belief.cov_norm * np.outer(s, s)
+    added = wide - base
+    assert added[0, 0] == pytest.approx(0.09) and added[1, 1] == pytest.approx(0.09)
+    assert added[0, 0] + added[1, 1] + 2 * added[0, 1] == pytest.approx(0.0, abs=1e-12)
+    np.testing.assert_allclose(added[2:, :], 0.0, atol=1e-15)
+    added = com.estimate(1).belief.cov_norm * np.outer(s, s) - base
+    np.testing.assert_allclose(np.diag(added), [0, 0, 16e-6, 16e-6, 0], atol=1e-15)
+
+
 @pytest.mark.slow
 def test_one_constant_push_reveals_mu_m_and_the_com_not_the_mass(model):
     """A quasi-static push on held-out rect2: μ·m and the CoM from the replay of VisNet's

@@ -146,11 +146,20 @@ class PhysicsFilterConfig(Config):
     )
     offset_fd_step: float = Field(0.3, gt=0, description="finite-difference step of an offset, mm")
     com_floor: float = Field(
-        2e-3,
+        3e-3,
         ge=0,
         description="m: std of the CoM relative to the true outline added to the reported CoM "
         "(in quadrature): the traced outline's placement error (its corners and edges within "
-        "about a pixel of the 256 px outline mask), which no number of pushes averages away",
+        "about a pixel of the 256 px outline mask), which no number of pushes averages away "
+        "(chosen on validation objects, docs/DESIGN.md §12)",
+    )
+    split_floor: float = Field(
+        0.25,
+        ge=0,
+        description="std of log m at fixed μ·m (so of log μ too) added to the reported belief "
+        "in quadrature: the split of μ·m into m and μ as the replay of a perceived pose track "
+        "reads it off a slide, which no noise term holds (chosen on validation objects, "
+        "docs/DESIGN.md §12)",
     )
     inertia_floor: float = Field(
         0.1, ge=0, description="std of log I_z added to the reported I_z in quadrature"

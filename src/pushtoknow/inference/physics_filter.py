@@ -26,7 +26,12 @@ from shapely.geometry import Polygon
 from pushtoknow.active.selection import ScoreName
 from pushtoknow.common.errors import DatasetError
 from pushtoknow.common.estimate import com_region
-from pushtoknow.common.params import denormalise_params, normalise_params, space_scale
+from pushtoknow.common.params import (
+    PARAM_NAMES,
+    denormalise_params,
+    normalise_params,
+    space_scale,
+)
 from pushtoknow.identification.fit import (
     UNKNOWN_FORCE_NOISE,
     closed_form_start,
@@ -152,21 +157,26 @@ class PhysicsFilterEstimator(Estimator):
             self._pool.close()
             self._pool = None
 
-    def belief_norm(self) -> tuple[np.ndarray, np.ndarray]:
+    def belief_norm(self, cov_u: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """The belief over the normalised parameters, the CoM in the object frame: mean (5,),
-        cov (5, 5). (The filter's own CoM is in the replayed outline's centroid frame.)"""
-        cov = self.t_inv @ self.cov @ self.t_inv.T
+        cov (5, 5), of the filter's covariance or `cov_u` (5, 5) in fit coordinates. (The
+        filter's own CoM is in the replayed outline's centroid frame.)"""
+        cov = self.t_inv @ (self.cov if cov_u is None else cov_u) @ self.t_inv.T
         mean = self.t_inv @ self.mean
         if self.scene is not None:
             mean[2:4] += np.asarray(self.scene.frame_offset) / space_scale()[2:4]
         return mean, 0.5 * (cov + cov.T)
 
     def estimate(self, index: int, push: Push | None = None) -> PushEstimate:
-        """The belief as an estimate, with the outline's placement error (`com_floor`) and the
-        replay's I_z floor (`inertia_floor`) added in quadrature once pushes were seen."""
-        mean, cov = self.belief_norm()
+        """The belief as an estimate, with the split of μ·m's floor (`split_floor`), the
+        outline's placement error (`com_floor`) and the replay's I_z floor (`inertia_floor`)
+        added in quadrature once pushes were seen."""
+        cfg, scale = self.filter_config, space_scale()
+        cov_u = self.cov.copy()
+        if self.updates:  # u_1 = z_m at fixed μ·m (`prior.fit_transform`)
+            cov_u[1, 1] += (cfg.split_floor / scale[PARAM_NAMES.index("mass")]) ** 2
+        mean, cov = self.belief_norm(cov_u)
         if self.updates:
-            cfg, scale = self.filter_config, space_scale()
             cov[2, 2] += (cfg.com_floor / scale[2]) ** 2
             cov[3, 3] += (cfg.com_floor / scale[3]) ** 2
             cov[4, 4] += (cfg.inertia_floor / scale[4]) ** 2
