@@ -26,12 +26,7 @@ from shapely.geometry import Polygon
 from pushtoknow.active.selection import ScoreName
 from pushtoknow.common.errors import DatasetError
 from pushtoknow.common.estimate import com_region
-from pushtoknow.common.params import (
-    PARAM_NAMES,
-    denormalise_params,
-    normalise_params,
-    space_scale,
-)
+from pushtoknow.common.params import denormalise_params, normalise_params, space_scale
 from pushtoknow.identification.fit import (
     UNKNOWN_FORCE_NOISE,
     closed_form_start,
@@ -171,15 +166,15 @@ class PhysicsFilterEstimator(Estimator):
         """The belief as an estimate, with the split of μ·m's floor (`split_floor`), the
         outline's placement error (`com_floor`) and the replay's I_z floor (`inertia_floor`)
         added in quadrature once pushes were seen."""
-        cfg, scale = self.filter_config, space_scale()
         cov_u = self.cov.copy()
-        if self.updates:  # u_1 = z_m at fixed μ·m (`prior.fit_transform`)
-            cov_u[1, 1] += (cfg.split_floor / scale[PARAM_NAMES.index("mass")]) ** 2
+        if self.updates:  # fit coordinates (`prior.fit_transform`): u_1 = z_m at fixed μ·m,
+            # u_2..4 = z_cx, z_cy, z_Iz; each floor in the units of its parameter's scale
+            cfg, scale = self.filter_config, space_scale()
+            floors = np.array(
+                [0.0, cfg.split_floor, cfg.com_floor, cfg.com_floor, cfg.inertia_floor]
+            )
+            cov_u[np.diag_indices(5)] += (floors / scale[[0, 0, 2, 3, 4]]) ** 2
         mean, cov = self.belief_norm(cov_u)
-        if self.updates:
-            cov[2, 2] += (cfg.com_floor / scale[2]) ** 2
-            cov[3, 3] += (cfg.com_floor / scale[3]) ** 2
-            cov[4, 4] += (cfg.inertia_floor / scale[4]) ** 2
         region = None
         if self.scene is not None:
             region = self.com_region + np.asarray(self.scene.frame_offset)
