@@ -14,6 +14,7 @@ from pushtoknow.identification.recursive import (
     PhysicsFilterConfig,
     expected_information,
     iterated_update,
+    refit,
 )
 from pushtoknow.identification.replay import PushTrack, ReplayScene
 from pushtoknow.testbed.push import Push
@@ -132,6 +133,35 @@ def test_the_contact_offset_is_estimated_jointly_and_marginalised():
     np.testing.assert_allclose(up.mean, want_mean[:5], atol=1e-6 * np.sqrt(np.diag(cov)).max())
     np.testing.assert_allclose(up.cov, want_cov[:5, :5], rtol=1e-5, atol=1e-12)
     assert up.contact_offset == pytest.approx(want_mean[5] * OFFSET_UNIT, abs=1e-9)
+
+
+def test_a_refit_of_every_push_is_the_kalman_update_of_them_all_from_the_prior():
+    """Two pushes with their own contact offsets refitted at once from the prior, the search
+    started far from the optimum: the Kalman update of the prior by both pushes, each with its
+    offset in the state and marginalised (the same as filtering them one by one)."""
+    a, b, mean, cov, track, scene = problem(12)
+    rng = np.random.default_rng(12)
+    g = rng.normal(size=T * 5) * np.tile(SIGMAS, T) * 2
+    s_std = 1.5  # mm
+    tracks, ys = [], []
+    for s_true in (0.8, -1.1):
+        y = np.column_stack([track.force, track.pose]).reshape(-1) + g * s_true
+        y = (y + rng.normal(size=T * 5) * np.tile(SIGMAS, T)).reshape(T, 5)
+        tracks.append(PushTrack(track.push, track.start, track.pose0, y[:, :2], y[:, 2:]))
+        ys.append(y)
+    cfg = EXACT.model_copy(update={"contact_offset_std": s_std * OFFSET_UNIT})
+    far = mean + 2 * np.sqrt(np.diag(cov))
+    up = refit(mean, cov, tracks, scene, LinearPool(a, b, g), SIGMAS, cfg, [far])
+    want_mean, want_cov = mean, cov
+    for y in ys:
+        aug_cov = np.pad(want_cov, ((0, 1), (0, 1)))
+        aug_cov[5, 5] = s_std**2
+        m, c = kalman(np.column_stack([a, g]), b, np.append(want_mean, 0.0), aug_cov, y)
+        want_mean, want_cov = m[:5], c[:5, :5]
+    np.testing.assert_allclose(up.mean, want_mean, atol=1e-6 * np.sqrt(np.diag(cov)).max())
+    np.testing.assert_allclose(up.cov, want_cov, rtol=1e-5, atol=1e-12)
+    one = iterated_update(mean, cov, tracks[0], scene, LinearPool(a, b, g), SIGMAS, cfg)
+    assert np.trace(up.cov) < np.trace(one.cov)  # the second push adds its information
 
 
 def test_a_quasi_static_push_leaves_mass_at_fixed_mu_m_and_inertia_at_the_prior():

@@ -114,6 +114,74 @@ def test_the_split_floor_widens_m_and_mu_not_their_product_once_pushes_were_seen
     np.testing.assert_allclose(np.diag(added), [0, 0, 16e-6, 16e-6, 0], atol=1e-15)
 
 
+def test_a_poor_push_refits_every_push_so_far_and_keeps_the_refit_only_where_it_fits(
+    model, monkeypatch
+):
+    """The second push cannot be reproduced from the belief: every push so far is refitted
+    from the prior, from the belief's mean and CoM starts spread over the outline, and the
+    refit, which explains them better than the belief's mean by more than `refit_gain`, becomes
+    the belief. A later refit that gains less is dropped, and no more than `max_refits` are
+    tried."""
+    import dataclasses
+
+    import pushtoknow.inference.physics_filter as physics_filter
+    from pushtoknow.identification.recursive import PhysicsFilterConfig, PhysicsUpdate
+    from pushtoknow.identification.replay import ReplayScene
+
+    @dataclasses.dataclass
+    class Record:
+        pose: np.ndarray
+        rgb: None = None
+        push: object = dataclasses.field(default_factory=lambda: type("P", (), {"profile": "x"}))
+
+    chi2 = iter([0.5, 9.0, 9.0, 9.0])  # the pushes' own updates: the first fits
+    refit_chi2 = iter([(0.8, 1.7), (9.0, 12.0)])  # the refit's and the belief's mean's
+    refits = []
+
+    def update(mean, cov, track, *args, **kwargs):
+        return PhysicsUpdate(mean + 0.01, 0.5 * cov, next(chi2), np.ones(5), np.ones(5), 3, 6, 2,
+                             poor_fit=False)  # fmt: skip
+
+    def refit(prior_mean, prior_cov, tracks, scene, pool, sigmas, config, starts):
+        refits.append((prior_mean, list(tracks), np.stack(starts)))
+        c, before = next(refit_chi2)
+        return PhysicsUpdate(prior_mean - 0.02, 0.1 * prior_cov, c, np.ones(5), np.ones(5), 5,
+                             40, 4, poor_fit=c > 2.0, start_chi2=(30.0, before))  # fmt: skip
+
+    def poor_update(*args, **kwargs):
+        up = update(*args, **kwargs)
+        return dataclasses.replace(up, poor_fit=up.chi2 > 2.0)
+
+    monkeypatch.setattr(physics_filter, "iterated_update", poor_update)
+    monkeypatch.setattr(physics_filter, "refit", refit)
+    monkeypatch.setattr(physics_filter, "tracks_from_records", lambda recs, sim: [recs[0].pose])
+    square = {"type": "polygon", "vertices": [[-0.05, -0.03], [0.05, -0.03], [0.05, 0.03],
+                                              [-0.05, 0.03]]}  # fmt: skip
+    cfg = PhysicsFilterConfig(max_refits=2)
+    est = PhysicsFilterEstimator(model, filter_config=cfg, scene=ReplayScene(square, 0.02, None))
+    prior_mean = est.mean.copy()
+    est._closed_form_start = lambda record: []
+    poses = [np.full((3, 3), k, dtype=float) for k in range(4)]
+    est.update(Record(poses[0]), None, np.zeros(3))
+    assert not refits and not est.updates[0].refit  # a good first push: no refit
+    est.update(Record(poses[1]), None, np.zeros(3))
+    (first,) = refits
+    np.testing.assert_array_equal(first[0], prior_mean)
+    assert [t[0, 0] for t in first[1]] == [0, 1]  # both pushes
+    starts = first[2]
+    assert len(starts) == 6 and np.all(starts[:, [0, 1, 4]] == starts[0, [0, 1, 4]])
+    spread = np.linalg.norm(starts[2:, 2:4] - prior_mean[2:4], axis=1)
+    np.testing.assert_allclose(starts[1, 2:4], prior_mean[2:4])
+    assert np.all(spread > 0.1)  # CoM starts away from the centroid
+    assert est.updates[-1].refit and est.updates[-1].replays == 46
+    np.testing.assert_allclose(est.mean, prior_mean - 0.02)
+    est.update(Record(poses[2]), None, np.zeros(3))  # a refit that gains too little
+    assert len(refits) == 2 and not est.updates[-1].refit
+    np.testing.assert_allclose(est.mean, prior_mean - 0.02 + 0.01)
+    est.update(Record(poses[3]), None, np.zeros(3))  # two refits tried: no more
+    assert len(refits) == 2
+
+
 @pytest.mark.slow
 def test_one_constant_push_reveals_mu_m_and_the_com_not_the_mass(model):
     """A quasi-static push on held-out rect2: μ·m and the CoM from the replay of VisNet's

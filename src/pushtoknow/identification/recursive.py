@@ -18,6 +18,9 @@ to the push's own misfit where the replay cannot reproduce it (a perceived outli
 the replay only approximates), counted by its effective number of samples, so model error
 widens the intervals instead of narrowing them.
 
+`refit` updates the prior by every push so far at once, from several starts: the physics
+filter's way out of a wrong basin when a push cannot be reproduced from the belief.
+
 `expected_information` scores candidate pushes by the entropy an update would remove,
 ½ log det(I + P^½ JᵀWJ P^½), with J the candidate's forward-difference replay Jacobian at the
 belief's mean (not linearised across the belief as the update is: a ranking, at six replays a
@@ -114,6 +117,21 @@ class PhysicsFilterConfig(Config):
         "inflated update on the validation objects of random seed 101 (17 poor pushes) while "
         "doubling the cost of each poor push",
     )
+    refit_spread: float = Field(
+        1.2,
+        ge=0,
+        description="a poor push (`poor_fit_chi2`) after the first refits every push so far from "
+        "the prior (`refit`), its search started at the best of the belief's mean and the CoM "
+        "moved this many of the prior CoM's standard deviations along each principal axis of "
+        "the outline (0: never); the refit is kept when it explains them better (`refit_gain`)",
+    )
+    refit_gain: float = Field(
+        0.5,
+        gt=0,
+        description="a refit is kept when its reduced χ² over every push so far is at most "
+        "this share of the belief's mean's (both as replayed from the prior)",
+    )
+    max_refits: int = Field(2, ge=0, description="refits per object at most")
     coarse_pose_factor: float = Field(
         10.0,
         ge=1,
@@ -191,7 +209,9 @@ class PhysicsUpdate:
     replay could not reproduce the push (`poor_fit_chi2`); contact_offset (m): where the
     object's edge lay along the push line relative to the outline seen; inflation: the factor
     the belief's covariance was inflated by before the update (its largest per coordinate; 1:
-    none)."""
+    none); refit: the belief is `refit`'s of every push so far (contact_offset the last
+    push's); start_chi2: the reduced χ² of each start of the search (the belief's mean first,
+    then the extra starts in order)."""
 
     mean: np.ndarray
     cov: np.ndarray
@@ -204,6 +224,8 @@ class PhysicsUpdate:
     poor_fit: bool = False
     contact_offset: float = 0.0
     inflation: float = 1.0
+    refit: bool = False
+    start_chi2: tuple[float, ...] = ()
 
 
 def rest_tolerance(config: PhysicsFilterConfig) -> tuple[float, float] | None:
@@ -232,51 +254,78 @@ def iterated_update(
     coordinate's variance at most the `ceiling` covariance's (5, 5) (the prior's; None: no
     bound), and the first that fits is kept. If none fits, the push is one the replay cannot
     reproduce at all, and the uninflated update stands."""
-    first = _update_once(mean, cov, track, scene, pool, sigmas, config, extra_starts)
+    first = _update_once(mean, cov, [track], scene, pool, sigmas, config, extra_starts)
     replays = first.replays
     for factor in config.inflation if first.poor_fit else ():
         d = np.full(len(mean), factor)
         if ceiling is not None:
             d = np.clip(np.diagonal(ceiling) / np.diagonal(cov), 1.0, factor)
         wide = np.sqrt(d)[:, None] * cov * np.sqrt(d)[None, :]
-        up = _update_once(mean, wide, track, scene, pool, sigmas, config, extra_starts)
+        up = _update_once(mean, wide, [track], scene, pool, sigmas, config, extra_starts)
         replays += up.replays
         if not up.poor_fit:
             return dataclasses.replace(up, inflation=float(np.max(d)), replays=replays)
     return dataclasses.replace(first, replays=replays)
 
 
+def refit(
+    prior_mean: np.ndarray,
+    prior_cov: np.ndarray,
+    tracks: Sequence[PushTrack],
+    scene: ReplayScene,
+    pool: RolloutPool,
+    sigmas: np.ndarray,
+    config: PhysicsFilterConfig,
+    starts: Sequence[np.ndarray],
+) -> PhysicsUpdate:
+    """The belief after every push in `tracks` (K) at once, from the prior (prior_mean (5,),
+    prior_cov (5, 5), fit coordinates): the update of the module doc with all K pushes'
+    measurements and contact offsets, its search begun at the best of the prior's mean and
+    `starts` (S, 5) by objective (`start_chi2` gives their misfits, the prior's first). A filter
+    whose belief sits in the wrong basin (a CoM read off one push that later pushes cannot
+    reproduce) is taken out of it this way: the batch is the smoother's answer."""
+    return _update_once(prior_mean, prior_cov, tracks, scene, pool, sigmas, config, starts)
+
+
 def _update_once(
     mean: np.ndarray,
     cov: np.ndarray,
-    track: PushTrack,
+    tracks: Sequence[PushTrack],
     scene: ReplayScene,
     pool: RolloutPool,
     sigmas: np.ndarray,
     config: PhysicsFilterConfig,
     extra_starts: Sequence[np.ndarray] = (),
 ) -> PhysicsUpdate:
-    """One update of `iterated_update` from the belief (mean, cov), without inflation."""
+    """One update of `iterated_update` from the belief (mean, cov), without inflation, by the
+    measurements of `tracks` (K pushes; K > 1: `refit`)."""
     cfg = config
-    res = ReplayResiduals(scene, [track], pool, sigmas, rest_tolerance(cfg), cfg.pose_correlation)
+    tracks = list(tracks)
+    res = ReplayResiduals(scene, tracks, pool, sigmas, rest_tolerance(cfg), cfg.pose_correlation)
     n = res.n_data
     before = pool.push_rollouts
     offset = cfg.contact_offset_std > 0
-    if offset:  # the push's contact offset joins the state (mm), marginalised at the end
-        mean = np.append(mean, 0.0)
-        cov = np.pad(cov, ((0, 1), (0, 1)))
-        cov[5, 5] = (cfg.contact_offset_std / OFFSET_UNIT) ** 2
-        extra_starts = [np.append(u, 0.0) for u in extra_starts]
+    k = len(tracks) if offset else 0
+    if offset:  # each push's contact offset joins the state (mm), marginalised at the end
+        mean = np.append(mean, np.zeros(k))
+        cov = np.pad(cov, ((0, k), (0, k)))
+        cov[np.arange(5, 5 + k), np.arange(5, 5 + k)] = (cfg.contact_offset_std / OFFSET_UNIT) ** 2
+        extra_starts = [np.append(u[:5], np.zeros(k)) for u in extra_starts]
     dim = len(mean)
     objective = Objective(res.residuals, n, res.robust, cfg.huber, mean, np.linalg.inv(cov))
     cost = objective.cost
 
     starts = np.stack([mean, *extra_starts])
     r_starts = res.residuals(starts)
+
+    def reduced_chi2(r: np.ndarray, params: int) -> float:
+        return float(np.sum(r[:n] ** 2) / max(n - params, 1))
+
+    start_chi2 = tuple(reduced_chi2(r_s, dim) for r_s in r_starts)
     costs = [cost(r, u) for r, u in zip(r_starts, starts)]
     best = int(np.argmin(costs))
     u, r, c = starts[best].copy(), r_starts[best], costs[best]
-    fd = np.asarray([*cfg.fd_steps, cfg.offset_fd_step][:dim], dtype=np.float64)
+    fd = np.asarray([*cfg.fd_steps, *[cfg.offset_fd_step] * k], dtype=np.float64)
     iterations = 0
 
     descent = DescentSettings(
@@ -298,9 +347,6 @@ def _update_once(
         d = levenberg_marquardt(objective, u, r, descent, c)
         iterations += d.iterations
         return d.u, d.r, d.cost, d.jacobian, d.step
-
-    def reduced_chi2(r: np.ndarray, params: int) -> float:
-        return float(np.sum(r[:n] ** 2) / max(n - params, 1))
 
     u, r, c, jac, step = descend(u, r, c)
     if reduced_chi2(r, 5) > cfg.poor_fit_chi2 and cfg.coarse_pose_factor > 1:
@@ -325,7 +371,8 @@ def _update_once(
     poor = chi2 > cfg.poor_fit_chi2
     # a quasi-static push reveals neither m at fixed μ·m nor I_z (docs/DESIGN.md §10); a push
     # the replay cannot reproduce reads them off accelerations and spin-downs it does not match
-    blind = is_quasi_static(track, scene.sim_config.tactile.rate_hz) or poor
+    rate = scene.sim_config.tactile.rate_hz
+    blind = all(is_quasi_static(t, rate) for t in tracks) or poor
 
     def posterior(jac_d: np.ndarray, extra_var: np.ndarray | float = 0.0):
         """The Laplace posterior of data Jacobian jac_d (n, D), each residual's variance in
@@ -363,7 +410,8 @@ def _update_once(
         replays=pool.push_rollouts - before,
         iterations=iterations,
         poor_fit=poor,
-        contact_offset=float(u[5] * OFFSET_UNIT) if offset else 0.0,
+        contact_offset=float(u[-1] * OFFSET_UNIT) if offset else 0.0,
+        start_chi2=start_chi2,
     )
 
 

@@ -8,7 +8,9 @@ pose track is VisNet's, frame by frame, each frame's reference pose the previous
 The parameter belief (a Gaussian over `identification.prior.fit_transform`'s coordinates,
 starting at the prior of the footprint seen, `identification.prior.footprint_prior`) is
 updated after each push by replaying it in the testbed's scene with that footprint
-(`identification.recursive.iterated_update`), carried to the next push. Active policies score
+(`identification.recursive.iterated_update`), carried to the next push; a push the replay
+cannot reproduce from the belief refits every push so far from the prior
+(`identification.recursive.refit`), kept when it explains them much better. Active policies score
 candidates by the entropy the same update would remove, from replays of the candidates at the
 belief's mean (`identification.recursive.expected_information`).
 """
@@ -43,6 +45,7 @@ from pushtoknow.identification.recursive import (
     PhysicsUpdate,
     expected_information,
     iterated_update,
+    refit,
 )
 from pushtoknow.identification.replay import PushTrack, ReplayScene, RolloutPool
 from pushtoknow.inference.estimator import (
@@ -124,13 +127,15 @@ class PhysicsFilterEstimator(Estimator):
         self.tmat = fit_transform()
         self.t_inv = np.linalg.inv(self.tmat)
         z, p_z = prior_moments(self.filter_config.prior)
-        self.mean = self.tmat @ z
+        self.mean = self.prior_mean = self.tmat @ z
         self.cov = self.prior_cov = self.tmat @ p_z @ self.tmat.T
         self.scene: ReplayScene | None = None
         self.com_region: np.ndarray | None = None  # (V, 2) where the CoM can lie, scene frame
         if scene is not None:
             self._use_scene(scene)
         self.updates: list[PhysicsUpdate] = []
+        self.tracks: list[PushTrack] = []  # the pushes seen, as replayed
+        self._refits_tried = 0
         self._pool: RolloutPool | None = None
         self._prev: tuple[np.ndarray, np.ndarray] | None = None  # (S_0, pose0) of last push
         self._last_pose: np.ndarray | None = None
@@ -215,7 +220,7 @@ class PhysicsFilterEstimator(Estimator):
             float(np.sqrt(np.trace(plate))),
             self.filter_config.prior,
         )
-        self.mean = self.tmat @ z
+        self.mean = self.prior_mean = self.tmat @ z
         self.cov = self.prior_cov = self.tmat @ p_z @ self.tmat.T
 
     def seen_object(self) -> tuple[np.ndarray, float] | None:
@@ -271,6 +276,24 @@ class PhysicsFilterEstimator(Estimator):
             extra,
             ceiling=self.prior_cov,
         )
+        self.tracks.append(track)
+        cfg = self.filter_config
+        may_refit = cfg.refit_spread > 0 and self._refits_tried < cfg.max_refits
+        if up.poor_fit and len(self.tracks) > 1 and may_refit:
+            self._refits_tried += 1
+            batch = refit(
+                self.prior_mean,
+                self.prior_cov,
+                self.tracks,
+                scene,
+                self.pool,
+                self.sigmas,
+                cfg,
+                self._refit_starts(up.mean),
+            )
+            log.debug("push %d: refit reduced chi2 %.2f", len(self.tracks), batch.chi2)
+            if batch.chi2 <= cfg.refit_gain * batch.start_chi2[1]:  # against the belief's mean
+                up = dataclasses.replace(batch, refit=True, replays=up.replays + batch.replays)
         self.mean, self.cov = up.mean, up.cov
         self.updates.append(up)
         log.debug(
@@ -286,6 +309,23 @@ class PhysicsFilterEstimator(Estimator):
             ", poor fit" if up.poor_fit else "",
         )
         return poses
+
+    def _refit_starts(self, mean: np.ndarray) -> list[np.ndarray]:
+        """Starts (5,) of a `refit`: `mean`, and `mean` with its CoM at the prior's (the
+        outline's hull's centroid) and moved `refit_spread` prior standard deviations either
+        way along each principal axis of the prior's CoM covariance (fit coordinates)."""
+        spread = self.filter_config.refit_spread
+        centre = self.prior_mean[2:4]
+        lam, vecs = np.linalg.eigh(self.prior_cov[2:4, 2:4])
+        shifts = [np.zeros(2)] + [
+            sign * spread * np.sqrt(lam[j]) * vecs[:, j] for j in range(2) for sign in (1, -1)
+        ]
+        starts = [mean]
+        for shift in shifts:
+            u = mean.copy()
+            u[2:4] = centre + shift
+            starts.append(u)
+        return starts
 
     def _closed_form_start(self, record: PushRecord) -> list[np.ndarray]:
         """The prior's mean with μ·m (and m, μ after a release) read off the push in closed
