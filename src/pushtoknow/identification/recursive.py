@@ -120,10 +120,9 @@ class PhysicsFilterConfig(Config):
     refit_spread: float = Field(
         1.2,
         ge=0,
-        description="a poor push (`poor_fit_chi2`) after the first refits every push so far from "
-        "the prior (`refit`), its search started at the best of the belief's mean and the CoM "
-        "moved this many of the prior CoM's standard deviations along each principal axis of "
-        "the outline (0: never); the refit is kept when it explains them better (`refit_gain`)",
+        description="a refit's search starts at the best of the belief's mean and that mean with "
+        "its CoM at the outline hull's centroid and moved this many of the prior CoM's standard "
+        "deviations along each principal axis",
     )
     refit_gain: float = Field(
         0.5,
@@ -134,7 +133,9 @@ class PhysicsFilterConfig(Config):
     max_refits: int = Field(
         0,
         ge=0,
-        description="refits per object at most (0: none). 2 halved the CoM's error on the "
+        description="a poor push (`poor_fit_chi2`) after the first refits every push so far "
+        "from the prior (`refit`), kept when it explains them better (`refit_gain`), this many "
+        "times per object at most (0: never). 2 halved the CoM's error on the "
         "validation objects and on random shapes of another seed, but tripled the time per "
         "object there and put one object's I_z ten times too high (docs/DESIGN.md §12)",
     )

@@ -279,8 +279,7 @@ class PhysicsFilterEstimator(Estimator):
         )
         self.tracks.append(track)
         cfg = self.filter_config
-        may_refit = cfg.refit_spread > 0 and self._refits_tried < cfg.max_refits
-        if up.poor_fit and len(self.tracks) > 1 and may_refit:
+        if up.poor_fit and len(self.tracks) > 1 and self._refits_tried < cfg.max_refits:
             self._refits_tried += 1
             batch = refit(
                 self.prior_mean,
