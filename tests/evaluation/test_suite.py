@@ -15,6 +15,7 @@ from pushtoknow.evaluation.suite import (
     fold_indices,
     summarise_method,
 )
+from pushtoknow.identification.prior import RANDOM_SHAPE_PRIOR
 from tiny_training import tiny_dataset, tiny_run
 
 CI_CONFIG = Path(__file__).parents[2] / "configs" / "evaluate-ci.yaml"
@@ -281,9 +282,34 @@ def test_the_cache_key_names_the_estimator(tmp_path):
         _cache_key(*args, "physics"),
         _cache_key(*args, "physics", pushes),
         _cache_key(*args, "physics", pushes + 1),
+        _cache_key(*args, "physics", pushes, RANDOM_SHAPE_PRIOR),
     }
-    assert len(keys) == 4
+    assert len(keys) == 5
     assert _cache_key(*args, "vt-addf") == _cache_key(*args)  # the learned runs' keys as before
+
+
+def test_the_physics_estimator_gets_each_sets_prior(tmp_path_factory, monkeypatch):
+    """The random set's physics rows run under the random shapes' prior (their I_z any m·k²),
+    the catalogue sets' under the catalogue's; the learned filter's runs take no prior."""
+    from pushtoknow.evaluation import suite
+    from pushtoknow.evaluation.heldout import HeldoutRun
+
+    calls = []
+
+    def fake(model, objects, pushes, policy, *args, estimator, prior=None, **kwargs):
+        calls.append((objects[0].split(":")[0], estimator, prior))
+        n, z = len(objects), np.zeros((len(objects), pushes + 1, 5))
+        return HeldoutRun(z, z + 1, z, np.zeros((n, pushes + 1)), np.full((n, 5), 0.5), objects,
+                          [1.0] * n, np.zeros((n, pushes, 3)), np.zeros((n, pushes, 3)),
+                          [["constant"] * pushes] * n, lower=z - 1, upper=z + 1)  # fmt: skip
+
+    monkeypatch.setattr(suite, "evaluate_heldout", fake)
+    cfg = EvaluationConfig.model_validate(TINY_EVAL | {"oracle": False})
+    out = tmp_path_factory.mktemp("priors")
+    suite.run_evaluation(None, [tiny_run(tmp_path_factory)], cfg, out)
+    physics = {s: p for s, e, p in calls if e == "physics"}
+    assert physics == {"catalogue": None, "random": RANDOM_SHAPE_PRIOR}
+    assert all(p is None for _, e, p in calls if e != "physics")
 
 
 def test_a_random_set_of_one_object(physics_eval):

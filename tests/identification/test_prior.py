@@ -10,8 +10,10 @@ from pushtoknow.common.params import PARAM_NAMES, denormalise_params, space_scal
 from pushtoknow.identification.prior import (
     CATALOGUE_PRIOR,
     EVERYDAY_PRIOR,
+    GYRATION_SPREAD,
     PriorRanges,
     footprint_prior,
+    inertia_moments,
     prior_moments,
 )
 
@@ -50,6 +52,54 @@ def test_the_footprint_prior_takes_m_and_mu_from_the_ranges():
         ref_mean, ref_cov = prior_moments(ranges)
         np.testing.assert_allclose(mean[[I_M, I_MU]], ref_mean[[I_M, I_MU]])
         np.testing.assert_allclose(cov[I_M, I_M], ref_cov[I_M, I_M])
+
+
+@settings(max_examples=25, deadline=None)
+@given(
+    m_lo=st.floats(0.05, 1.0),
+    m_ratio=st.floats(1.5, 20.0),
+    k=st.floats(0.01, 0.1),
+    i_lo=st.floats(1e-5, 2e-3),
+    i_ratio=st.floats(1.5, 1e4),
+)
+def test_the_inertia_moments_are_the_plate_relation_restricted_to_the_range(
+    m_lo, m_ratio, k, i_lo, i_ratio
+):
+    """Against a brute-force quadrature on a grid: m uniform over its range, and given m,
+    log I_z's density ∝ exp(−(log I_z − log m − 2 log k)² / (2 (2·spread)²)) over the range."""
+    m_range, i_range = (m_lo, m_lo * m_ratio), (i_lo, i_lo * i_ratio)
+    m = np.linspace(*m_range, 1500)
+    b = np.linspace(np.log(i_range[0]), np.log(i_range[1]), 1500)
+    z = (b[None] - np.log(m)[:, None] - 2 * np.log(k)) / (2 * GYRATION_SPREAD)
+    log_p = -0.5 * z**2
+    p = np.exp(log_p - log_p.max(axis=1, keepdims=True))
+    p /= p.sum(axis=1, keepdims=True) * len(m)  # each m its share 1 / len(m)
+    ref_mean = float(np.sum(p * b[None]))
+    ref_var = float(np.sum(p * b[None] ** 2)) - ref_mean**2
+    ref_cov = float(np.sum(p * np.log(m)[:, None] * b[None])) - float(np.mean(np.log(m))) * ref_mean
+    mean, var, cov = inertia_moments(m_range, i_range, k)
+    assert mean == pytest.approx(ref_mean, abs=0.01)
+    assert var == pytest.approx(ref_var, rel=0.03, abs=1e-3)
+    assert cov == pytest.approx(ref_cov, rel=0.03, abs=1e-3)
+
+
+def test_a_wide_inertia_range_leaves_the_plate_relation_and_a_narrow_one_holds_i_z_inside():
+    """Everyday range: E[log I_z] = E[log m] + 2 log k, slope 1 on log m (to the share of
+    the relation beyond 0.08 kg·m²). The catalogue's
+    (0.5–1.5 g·m²): a footprint whose plate would put I_z at 2.3 g·m² for the median mass keeps
+    I_z's median inside the range, and log m moves it much less."""
+    square = np.array([[-0.04, -0.04], [0.04, -0.04], [0.04, 0.04], [-0.04, 0.04]])
+    scale = space_scale()
+    mean, cov = footprint_prior(square, 0.04, EVERYDAY_PRIOR)
+    phi = denormalise_params(mean)
+    assert phi[I_IZ] == pytest.approx(phi[I_M] * 0.04**2, rel=1e-3)
+    var_m = cov[I_M, I_M] * scale[I_M] ** 2
+    assert cov[I_IZ, I_M] * scale[I_IZ] * scale[I_M] == pytest.approx(var_m, rel=1e-2)
+    mean, cov = footprint_prior(square, 0.06, CATALOGUE_PRIOR)
+    phi = denormalise_params(mean)
+    assert CATALOGUE_PRIOR.inertia[0] < phi[I_IZ] < CATALOGUE_PRIOR.inertia[1]
+    slope = cov[I_IZ, I_M] * scale[I_IZ] / (cov[I_M, I_M] * scale[I_M])
+    assert 0 < slope < 0.5
 
 
 @pytest.mark.parametrize(

@@ -18,6 +18,7 @@ from pushtoknow.common.files import atomic_write
 from pushtoknow.common.parallel import Workers, runner_for
 from pushtoknow.common.params import product_moments
 from pushtoknow.evaluation.metrics import coverage, nrmse, product_nrmse
+from pushtoknow.identification.prior import PriorRanges
 from pushtoknow.inference.policies import PushDecision, PushPolicy
 from pushtoknow.testbed.push import Push
 from pushtoknow.testbed.sim import PushRecord
@@ -78,6 +79,7 @@ def _run_one(args) -> dict:
     model_path, object_ref, pushes, policy, seed, sigma_points, profiles, *rest = args
     estimator = rest[0] if rest else LEARNED_ESTIMATOR
     given = rest[1] if len(rest) > 1 else None  # (K, 5) pushes to replay, or None
+    prior = rest[2] if len(rest) > 2 else None  # the physics estimator's PriorRanges, or None
     t0 = time.perf_counter()
     import torch
 
@@ -98,9 +100,10 @@ def _run_one(args) -> dict:
         from pushtoknow.identification.recursive import PhysicsFilterConfig
         from pushtoknow.inference.physics_filter import PhysicsFilterEstimator
 
-        est = PhysicsFilterEstimator(
-            model, cfg, stream_seed(seed, "estimator"), filter_config=PhysicsFilterConfig(workers=1)
-        )
+        settings = {"workers": 1} if prior is None else {"workers": 1, "prior": prior}
+        physics = PhysicsFilterConfig(**settings)
+        seed_est = stream_seed(seed, "estimator")
+        est = PhysicsFilterEstimator(model, cfg, seed_est, filter_config=physics)
     try:
         replay = None if given is None else ReplayPolicy(given)
         res = infer_simulated(
@@ -155,6 +158,7 @@ def evaluate_heldout(
     estimator: str = LEARNED_ESTIMATOR,
     push_actions: np.ndarray | None = None,
     finished: Path | None = None,
+    prior: PriorRanges | None = None,
 ) -> HeldoutRun:
     """Run inference on each object (`catalogue:ID` or spec strings) on `workers` (local
     processes or a `TaskRunner`); `profiles`: the speed profiles the policy may use
@@ -167,7 +171,8 @@ def evaluate_heldout(
     instead of the policy's (the policy's name is then a label). `finished`: a folder keeping
     each object's result as it finishes (`<index>.pkl`), read back instead of rerunning it, so
     a run stopped for any reason loses no finished object; the caller names one folder per
-    run's settings and removes it once the whole run is saved."""
+    run's settings and removes it once the whole run is saved. `prior`: the ranges of the
+    physics estimator's prior (None: its default, the catalogue's)."""
     jobs = [
         (
             str(model_path),
@@ -179,6 +184,7 @@ def evaluate_heldout(
             tuple(profiles),
             estimator,
             None if push_actions is None else np.asarray(push_actions[i], dtype=np.float64),
+            prior,
         )
         for i, o in enumerate(objects)
     ]

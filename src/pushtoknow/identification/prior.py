@@ -19,17 +19,18 @@ from typing import Annotated
 
 import numpy as np
 from pydantic import AfterValidator
+from scipy.stats import truncnorm
 
 from pushtoknow.common.frozen_config import Config
 from pushtoknow.common.params import (
     LOG_PARAMS,
     PARAM_NAMES,
     PARAM_RANGES,
-    denormalise_params,
     normalise_param,
     space_scale,
 )
 from pushtoknow.testbed.objects import FRICTION_LIMIT, MAX_MASS
+from pushtoknow.testbed.random_shapes import INERTIA_RANGE as RANDOM_SHAPE_INERTIA
 
 
 def _log_uniform_moments(a: float, b: float) -> tuple[float, float]:
@@ -65,8 +66,9 @@ class PriorRanges(Config):
     """Where the prior puts m, μ and I_z: each uniform over its (low, high) range (kg, –,
     kg·m²); the CoM is uniform over the footprint (`footprint_prior`) or, with no footprint,
     over the catalogue's range. The default: the testbed catalogue's ranges
-    (`common.params.PARAM_RANGES`), which simulated objects are drawn from; `EVERYDAY_PRIOR`
-    covers everyday objects and surfaces (real recordings)."""
+    (`common.params.PARAM_RANGES`), which catalogue and novel objects are drawn from;
+    `RANDOM_SHAPE_PRIOR` the random-shape objects'; `EVERYDAY_PRIOR` covers everyday objects
+    and surfaces (real recordings)."""
 
     mass: Annotated[tuple[float, float], AfterValidator(_range("mass", 1e-3, MAX_MASS))] = (
         PARAM_RANGES["mass"]
@@ -94,6 +96,10 @@ CATALOGUE_PRIOR = PriorRanges()
 # everyday objects and surfaces: 50 g–5 kg; μ from PTFE-like (0.05) to rubber (1.2); I_z from a
 # 50 g, 3 cm puck to a 5 kg, 30 cm plate
 EVERYDAY_PRIOR = PriorRanges(mass=(0.05, 5.0), friction=(0.05, 1.2), inertia=(5e-6, 0.08))
+# the random-shape objects' (`testbed.random_shapes`): m and μ the catalogue's, I_z any the
+# generator draws (m·k² for a radius of gyration near the footprint's plate, not the catalogue's
+# I_z range)
+RANDOM_SHAPE_PRIOR = PriorRanges(inertia=RANDOM_SHAPE_INERTIA)
 
 
 def prior_moments(ranges: PriorRanges = CATALOGUE_PRIOR) -> tuple[np.ndarray, np.ndarray]:
@@ -152,15 +158,43 @@ def polygon_moments(vertices: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return c, cov
 
 
+INERTIA_NODES = 64  # Gauss–Legendre nodes over the mass range in `inertia_moments`
+
+
+def inertia_moments(
+    mass_range: tuple[float, float],
+    inertia_range: tuple[float, float],
+    gyration_radius: float,
+) -> tuple[float, float, float]:
+    """E[log I_z], var(log I_z) and cov(log m, log I_z) for m uniform over `mass_range` (kg)
+    and log I_z given m normal about log m + 2 log k (k = `gyration_radius`, m; std
+    2·`GYRATION_SPREAD`) restricted to `inertia_range` (kg·m²): a plate-like object's inertia,
+    within the range the prior allows. Where the range is wide, E[log I_z] = E[log m] + 2 log k
+    and the slope on log m is 1; where it is narrow (the catalogue's), I_z keeps inside it
+    whatever m is, and log m moves log I_z less."""
+    nodes, weights = np.polynomial.legendre.leggauss(INERTIA_NODES)
+    lo, hi = mass_range
+    log_m = np.log(0.5 * (hi - lo) * nodes + 0.5 * (hi + lo))  # m uniform: nodes in m
+    w = weights / weights.sum()
+    centre = log_m + 2.0 * np.log(gyration_radius)
+    sd = 2.0 * GYRATION_SPREAD
+    a, b = (np.log(inertia_range[0]) - centre) / sd, (np.log(inertia_range[1]) - centre) / sd
+    mean_c, var_c = truncnorm.stats(a, b, loc=centre, scale=sd, moments="mv")
+    mean_iz = float(w @ mean_c)
+    var_iz = float(w @ (var_c + mean_c**2)) - mean_iz**2
+    cov_m_iz = float(w @ (log_m * mean_c)) - float(w @ log_m) * mean_iz
+    return mean_iz, var_iz, cov_m_iz
+
+
 def footprint_prior(
     com_region: np.ndarray, gyration_radius: float, ranges: PriorRanges = CATALOGUE_PRIOR
 ) -> tuple[np.ndarray, np.ndarray]:
     """Mean (5,) and covariance (5, 5) over the normalised parameters of an object whose
     footprint is seen: m and μ as `prior_moments(ranges)`; the CoM uniform over `com_region` (V, 2),
     the footprint's convex hull less the testbed's margin (where any mass distribution puts
-    it); log I_z = log m + 2 log k, k the footprint's uniform-plate radius of gyration
-    `gyration_radius` (m) times a log-normal factor of std `GYRATION_SPREAD`. Normalised values
-    of a CoM or I_z beyond the catalogue ranges lie beyond ±1."""
+    it); log I_z given m about log m + 2 log k, k the footprint's uniform-plate radius of
+    gyration `gyration_radius` (m), within the prior's I_z range (`inertia_moments`).
+    Normalised values of a CoM or I_z beyond the catalogue ranges lie beyond ±1."""
     mean, cov = prior_moments(ranges)
     scale = space_scale()
     i_m, i_cx, i_iz = (
@@ -172,12 +206,8 @@ def footprint_prior(
     s_c = scale[i_cx : i_cx + 2]
     mean[i_cx : i_cx + 2] = [normalise_param("com_x", c[0]), normalise_param("com_y", c[1])]
     cov[i_cx : i_cx + 2, i_cx : i_cx + 2] = c_cov / np.outer(s_c, s_c)
-    # in the filtering space (log): log I_z = log m + log k_u² + 2ε, ε ~ N(0, spread²)
-    log_m = float(np.log(denormalise_params(mean)[i_m]))
-    log_iz = log_m + 2.0 * np.log(gyration_radius)
-    var_log_m = cov[i_m, i_m] * scale[i_m] ** 2
-    var_log_iz = var_log_m + (2.0 * GYRATION_SPREAD) ** 2
-    mean[i_iz] = normalise_param("inertia", float(np.exp(log_iz)))
-    cov[i_iz, i_iz] = var_log_iz / scale[i_iz] ** 2
-    cov[i_iz, i_m] = cov[i_m, i_iz] = var_log_m / (scale[i_iz] * scale[i_m])
+    mean_iz, var_iz, cov_m_iz = inertia_moments(ranges.mass, ranges.inertia, gyration_radius)
+    mean[i_iz] = normalise_param("inertia", float(np.exp(mean_iz)))
+    cov[i_iz, i_iz] = var_iz / scale[i_iz] ** 2
+    cov[i_iz, i_m] = cov[i_m, i_iz] = cov_m_iz / (scale[i_iz] * scale[i_m])
     return mean, cov
