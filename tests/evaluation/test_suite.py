@@ -15,7 +15,7 @@ from pushtoknow.evaluation.suite import (
     fold_indices,
     summarise_method,
 )
-from pushtoknow.identification.prior import RANDOM_SHAPE_PRIOR
+from pushtoknow.identification.prior import CATALOGUE_PRIOR, RANDOM_SHAPE_PRIOR
 from tiny_training import tiny_dataset, tiny_run
 
 CI_CONFIG = Path(__file__).parents[2] / "configs" / "evaluate-ci.yaml"
@@ -282,34 +282,33 @@ def test_the_cache_key_names_the_estimator(tmp_path):
         _cache_key(*args, "physics"),
         _cache_key(*args, "physics", pushes),
         _cache_key(*args, "physics", pushes + 1),
-        _cache_key(*args, "physics", pushes, RANDOM_SHAPE_PRIOR),
     }
-    assert len(keys) == 5
+    assert len(keys) == 4
     assert _cache_key(*args, "vt-addf") == _cache_key(*args)  # the learned runs' keys as before
 
 
-def test_the_physics_estimator_gets_each_sets_prior(tmp_path_factory, monkeypatch):
-    """The random set's physics rows run under the random shapes' prior (their I_z any m·k²),
-    the catalogue sets' under the catalogue's; the learned filter's runs take no prior."""
-    from pushtoknow.evaluation import suite
-    from pushtoknow.evaluation.heldout import HeldoutRun
+def test_each_objects_physics_run_is_under_the_prior_the_testbed_draws_it_from(monkeypatch):
+    """The evaluation's physics filter on a random shape runs under the random shapes' prior
+    (their I_z any m·k²), on a catalogue object under the catalogue's."""
+    from pushtoknow.evaluation.heldout import _run_one
+    from pushtoknow.inference import physics_filter
+    from pushtoknow.pretrained import resolve_model_path
 
-    calls = []
+    seen = []
 
-    def fake(model, objects, pushes, policy, *args, estimator, prior=None, **kwargs):
-        calls.append((objects[0].split(":")[0], estimator, prior))
-        n, z = len(objects), np.zeros((len(objects), pushes + 1, 5))
-        return HeldoutRun(z, z + 1, z, np.zeros((n, pushes + 1)), np.full((n, 5), 0.5), objects,
-                          [1.0] * n, np.zeros((n, pushes, 3)), np.zeros((n, pushes, 3)),
-                          [["constant"] * pushes] * n, lower=z - 1, upper=z + 1)  # fmt: skip
+    class Stop(Exception):
+        pass
 
-    monkeypatch.setattr(suite, "evaluate_heldout", fake)
-    cfg = EvaluationConfig.model_validate(TINY_EVAL | {"oracle": False})
-    out = tmp_path_factory.mktemp("priors")
-    suite.run_evaluation(None, [tiny_run(tmp_path_factory)], cfg, out)
-    physics = {s: p for s, e, p in calls if e == "physics"}
-    assert physics == {"catalogue": None, "random": RANDOM_SHAPE_PRIOR}
-    assert all(p is None for _, e, p in calls if e != "physics")
+    def fake(model, cfg, seed, filter_config):
+        seen.append(filter_config.prior)
+        raise Stop
+
+    monkeypatch.setattr(physics_filter, "PhysicsFilterEstimator", fake)
+    model = str(resolve_model_path("pretrained"))
+    for ref in ("random:3:0", "catalogue:5"):
+        with pytest.raises(Stop):
+            _run_one((model, ref, 1, "uniform", 0, None, ("constant",), "physics", None))
+    assert seen == [RANDOM_SHAPE_PRIOR, CATALOGUE_PRIOR]
 
 
 def test_a_random_set_of_one_object(physics_eval):

@@ -11,8 +11,10 @@ from pushtoknow.identification.prior import (
     CATALOGUE_PRIOR,
     EVERYDAY_PRIOR,
     GYRATION_SPREAD,
+    RANDOM_SHAPE_PRIOR,
     PriorRanges,
     footprint_prior,
+    generator_prior,
     inertia_moments,
     prior_moments,
 )
@@ -100,6 +102,20 @@ def test_a_wide_inertia_range_leaves_the_plate_relation_and_a_narrow_one_holds_i
     assert CATALOGUE_PRIOR.inertia[0] < phi[I_IZ] < CATALOGUE_PRIOR.inertia[1]
     slope = cov[I_IZ, I_M] * scale[I_IZ] / (cov[I_M, I_M] * scale[I_M])
     assert 0 < slope < 0.5
+
+
+def test_the_generator_prior_of_random_shapes_holds_every_inertia_they_are_drawn_with():
+    from pushtoknow.testbed.object_refs import load_object_spec
+    from pushtoknow.testbed.random_shapes import random_objects
+
+    assert generator_prior(load_object_spec("catalogue:5")) == CATALOGUE_PRIOR
+    specs = random_objects(60, seed=4)
+    assert all(generator_prior(s) == RANDOM_SHAPE_PRIOR for s in specs)
+    lo, hi = RANDOM_SHAPE_PRIOR.inertia
+    inertia = np.array([s.params.inertia for s in specs])
+    assert np.all((lo <= inertia) & (inertia <= hi))
+    c_lo, c_hi = CATALOGUE_PRIOR.inertia  # why they need their own: many lie outside these
+    assert np.mean((inertia < c_lo) | (inertia > c_hi)) > 0.1
 
 
 @pytest.mark.parametrize(

@@ -290,3 +290,25 @@ def test_each_push_keeps_the_evidence_of_its_count_among_its_profiles(model, spe
     monkeypatch.setattr(InferenceSettings, "kept_evidence", spy)
     infer(model, spec, "uniform", seed=0, pushes=3, profiles=("constant", "release"))
     assert calls == [("constant", 1), ("release", 1), ("constant", 2)]
+
+
+@pytest.mark.parametrize("ref", ["random:3:0", "catalogue:5"])
+def test_a_testbed_object_is_estimated_under_the_prior_it_is_drawn_from(model, ref, monkeypatch):
+    """infer_simulated's physics filter takes the random shapes' prior on a random shape (their
+    I_z any m·k²), the catalogue's on a catalogue object (`prior.generator_prior`)."""
+    from pushtoknow.identification.prior import CATALOGUE_PRIOR, RANDOM_SHAPE_PRIOR
+    from pushtoknow.inference import session
+
+    seen = []
+
+    class Stop(Exception):
+        pass
+
+    def fake(model, config, seed, sim_config=None, prior=None):
+        seen.append(prior)
+        raise Stop
+
+    monkeypatch.setattr(session, "make_estimator", fake)
+    with pytest.raises(Stop):
+        session.infer_simulated(model, ref, InferenceConfig(estimator="physics", pushes=1))
+    assert seen == [RANDOM_SHAPE_PRIOR if ref.startswith("random") else CATALOGUE_PRIOR]

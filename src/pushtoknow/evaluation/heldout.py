@@ -18,7 +18,6 @@ from pushtoknow.common.files import atomic_write
 from pushtoknow.common.parallel import Workers, runner_for
 from pushtoknow.common.params import product_moments
 from pushtoknow.evaluation.metrics import coverage, nrmse, product_nrmse
-from pushtoknow.identification.prior import PriorRanges
 from pushtoknow.inference.policies import PushDecision, PushPolicy
 from pushtoknow.testbed.push import Push
 from pushtoknow.testbed.sim import PushRecord
@@ -79,7 +78,6 @@ def _run_one(args) -> dict:
     model_path, object_ref, pushes, policy, seed, sigma_points, profiles, *rest = args
     estimator = rest[0] if rest else LEARNED_ESTIMATOR
     given = rest[1] if len(rest) > 1 else None  # (K, 5) pushes to replay, or None
-    prior = rest[2] if len(rest) > 2 else None  # the physics estimator's PriorRanges, or None
     t0 = time.perf_counter()
     import torch
 
@@ -97,11 +95,11 @@ def _run_one(args) -> dict:
     if estimator == "physics":
         # objects are the parallel unit here: each physics filter replays in its own process
         from pushtoknow.common.random import stream_seed
+        from pushtoknow.identification.prior import generator_prior
         from pushtoknow.identification.recursive import PhysicsFilterConfig
         from pushtoknow.inference.physics_filter import PhysicsFilterEstimator
 
-        settings = {"workers": 1} if prior is None else {"workers": 1, "prior": prior}
-        physics = PhysicsFilterConfig(**settings)
+        physics = PhysicsFilterConfig(workers=1, prior=generator_prior(spec))
         seed_est = stream_seed(seed, "estimator")
         est = PhysicsFilterEstimator(model, cfg, seed_est, filter_config=physics)
     try:
@@ -158,7 +156,6 @@ def evaluate_heldout(
     estimator: str = LEARNED_ESTIMATOR,
     push_actions: np.ndarray | None = None,
     finished: Path | None = None,
-    prior: PriorRanges | None = None,
 ) -> HeldoutRun:
     """Run inference on each object (`catalogue:ID` or spec strings) on `workers` (local
     processes or a `TaskRunner`); `profiles`: the speed profiles the policy may use
@@ -171,8 +168,8 @@ def evaluate_heldout(
     instead of the policy's (the policy's name is then a label). `finished`: a folder keeping
     each object's result as it finishes (`<index>.pkl`), read back instead of rerunning it, so
     a run stopped for any reason loses no finished object; the caller names one folder per
-    run's settings and removes it once the whole run is saved. `prior`: the ranges of the
-    physics estimator's prior (None: its default, the catalogue's)."""
+    run's settings and removes it once the whole run is saved. The physics estimator's prior
+    is the one the testbed draws each object from (`identification.prior.generator_prior`)."""
     jobs = [
         (
             str(model_path),
@@ -184,7 +181,6 @@ def evaluate_heldout(
             tuple(profiles),
             estimator,
             None if push_actions is None else np.asarray(push_actions[i], dtype=np.float64),
-            prior,
         )
         for i, o in enumerate(objects)
     ]

@@ -82,7 +82,7 @@ from pushtoknow.evaluation.metrics import (
     nrmse,
     product_nrmse,
 )
-from pushtoknow.identification.prior import RANDOM_SHAPE_PRIOR, PriorRanges
+from pushtoknow.identification.prior import CATALOGUE_PRIOR, generator_prior
 from pushtoknow.testbed.object_refs import load_object_spec
 from pushtoknow.testbed.sim import PushRecord, stack_records, unstack_records
 
@@ -262,12 +262,10 @@ def _cache_key(
     profiles: tuple[str, ...],
     estimator: str = LEARNED_ESTIMATOR,
     push_actions: np.ndarray | None = None,
-    prior_ranges: PriorRanges | None = None,
 ) -> str:
     """The key of a cached inference run. The physics estimator's includes its name, the code
     of the filter (a changed algorithm must not reuse old runs) and the pushes it replayed; the
-    learned filter's is the key it always had, so existing caches stay valid; `prior_ranges`:
-    the physics estimator's prior, where not its default."""
+    learned filter's is the key it always had, so existing caches stay valid."""
     h = hashlib.sha256()
     ckpt = Path(model) / "model.pt" if Path(model).is_dir() else Path(model)
     # the checkpoint's bytes, not its path: a retrained model at the same path must not reuse
@@ -290,8 +288,6 @@ def _cache_key(
 
             for module in (physics_filter, recursive, optimise, residuals, replay, fit, prior):
                 h.update(Path(module.__file__).read_bytes())
-            if prior_ranges is not None:
-                settings.append({"prior": prior_ranges.model_dump()})
     if push_actions is not None:
         h.update(np.ascontiguousarray(push_actions, dtype=np.float64).tobytes())
     h.update(json.dumps(settings).encode())
@@ -377,14 +373,12 @@ def _inference_run(
     workers: Workers = 1,
     estimator: str = LEARNED_ESTIMATOR,
     push_actions: np.ndarray | None = None,
-    prior: PriorRanges | None = None,
 ) -> HeldoutRun:
     """The model's run under `policy` on `objects`, from `cache` when it holds the same run (and
     its pushes, when `need_pushes`: the oracle replays them); `estimator`: the learned
     filter or the physics one (on the model's perception); `push_actions` (N, K, 5): another
-    run's pushes, executed instead of the policy's choices; `prior`: the physics estimator's
-    prior ranges (None: the catalogue's)."""
-    key = _cache_key(model, policy, objects, cfg, profiles, estimator, push_actions, prior)
+    run's pushes, executed instead of the policy's choices."""
+    key = _cache_key(model, policy, objects, cfg, profiles, estimator, push_actions)
     cached = _load_run(cache, key)
     if cached is not None and not (need_pushes and cached.pushes is None):
         return cached
@@ -402,7 +396,6 @@ def _inference_run(
         estimator=estimator,
         push_actions=push_actions,
         finished=finished,
-        prior=prior,
     )
     _save_run(cache, key, run)
     shutil.rmtree(finished, ignore_errors=True)
@@ -668,9 +661,6 @@ def run_evaluation(
         prior = PriorMeanPredictor().fit(Y[first])
         data_info = {"path": str(data), "pushes": int(len(X)), "objects": int(len(first))}
 
-    # the physics estimator's prior per set, where not the catalogue's: random shapes' I_z is
-    # m·k² for their own footprint, outside the catalogue's I_z range
-    set_priors = {RANDOM_SET: RANDOM_SHAPE_PRIOR}
     results_sets: dict[str, dict] = {}
     runs_for_figures: dict[str, dict[str, MethodRun]] = {}
     kept_rows: dict[str, list[str]] = {}
@@ -726,8 +716,7 @@ def run_evaluation(
             cache = out / "cache" / set_name / f"{method.replace(':', '_')}.npz"
             need_pushes = is_base and need_oracle
             args = (model, policy, objects, cfg, profiles, cache, adv, need_pushes, workers)
-            ranges = set_priors.get(set_name) if estimator == PHYSICS else None
-            run = _inference_run(*args, estimator=estimator, push_actions=given, prior=ranges)
+            run = _inference_run(*args, estimator=estimator, push_actions=given)
             if first:
                 learned[policy] = run
             if is_base:
@@ -745,7 +734,8 @@ def run_evaluation(
                 continue  # run for the physics row's pushes only
             methods[method] = _method_run(run)
             said = [f"the pushes of {names[0]}:{policy}, replayed"] if given is not None else []
-            said += [f"prior {ranges.label()}"] if ranges is not None else []
+            ranges = {generator_prior(s) for s in specs[set_name]} - {CATALOGUE_PRIOR}
+            said += [f"prior {r.label()}" for r in ranges] if estimator == PHYSICS else []
             if said:
                 notes[method] = "; ".join(said)
         if PRIOR not in old:

@@ -29,8 +29,9 @@ from pushtoknow.common.params import (
     normalise_param,
     space_scale,
 )
-from pushtoknow.testbed.objects import FRICTION_LIMIT, MAX_MASS
+from pushtoknow.testbed.objects import FRICTION_LIMIT, MAX_MASS, ObjectSpec
 from pushtoknow.testbed.random_shapes import INERTIA_RANGE as RANDOM_SHAPE_INERTIA
+from pushtoknow.testbed.random_shapes import is_random_shape
 
 
 def _log_uniform_moments(a: float, b: float) -> tuple[float, float]:
@@ -100,6 +101,12 @@ EVERYDAY_PRIOR = PriorRanges(mass=(0.05, 5.0), friction=(0.05, 1.2), inertia=(5e
 # generator draws (m·k² for a radius of gyration near the footprint's plate, not the catalogue's
 # I_z range)
 RANDOM_SHAPE_PRIOR = PriorRanges(inertia=RANDOM_SHAPE_INERTIA)
+
+
+def generator_prior(spec: ObjectSpec) -> PriorRanges:
+    """The ranges the testbed draws `spec` from: the random shapes' (`RANDOM_SHAPE_PRIOR`) or
+    the catalogue's (catalogue and novel objects, spec files)."""
+    return RANDOM_SHAPE_PRIOR if is_random_shape(spec) else CATALOGUE_PRIOR
 
 
 def prior_moments(ranges: PriorRanges = CATALOGUE_PRIOR) -> tuple[np.ndarray, np.ndarray]:

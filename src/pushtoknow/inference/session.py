@@ -19,6 +19,7 @@ import numpy as np
 
 from pushtoknow.common.errors import UntrainedProfileError
 from pushtoknow.common.random import stream, stream_seed
+from pushtoknow.identification.prior import PriorRanges, generator_prior
 from pushtoknow.inference.estimator import (
     Estimator,
     InferenceConfig,
@@ -44,14 +45,18 @@ def make_estimator(
     config: InferenceConfig = InferenceConfig(),
     seed: int = 0,
     sim_config: SimConfig | None = None,
+    prior: PriorRanges | None = None,
 ) -> Estimator:
     """The estimator `config.estimator` names, on `model` (the learned filter; the physics
-    filter uses its perception), for pushes run with `sim_config` (default: the model's)."""
+    filter uses its perception), for pushes run with `sim_config` (default: the model's);
+    `prior`: the physics filter's prior ranges (None: the catalogue's)."""
     sim = sim_config or model.sim_config
     if config.estimator == "physics":
+        from pushtoknow.identification.recursive import PhysicsFilterConfig
         from pushtoknow.inference.physics_filter import PhysicsFilterEstimator
 
-        return PhysicsFilterEstimator(model, config, seed, sim)
+        physics = None if prior is None else PhysicsFilterConfig(prior=prior)
+        return PhysicsFilterEstimator(model, config, seed, sim, filter_config=physics)
     return LearnedFilterEstimator(model, config, seed, sim)
 
 
@@ -82,11 +87,13 @@ def infer_object(
     policy: PushPolicy | None = None,
     sim_config: SimConfig | None = None,
     estimator: Estimator | None = None,
+    prior: PriorRanges | None = None,
 ) -> InferenceResult:
     """K pushes on the executor's object; `on_push(estimate)` after each push.
 
     `policy` chooses each push (default: `make_policy(config.policy)`); `estimator` carries
-    the belief (default: `make_estimator(model, config, seed, sim_config)`, closed at the end);
+    the belief (default: `make_estimator(model, config, seed, sim_config, prior)`, closed at
+    the end);
     `sim_config`: the testbed settings the executor runs pushes with (default: the model's).
     Raises ArgumentTypeError / ArgumentValueError naming a wrong argument."""
     from pushtoknow.common.arguments import (
@@ -114,7 +121,9 @@ def infer_object(
     if policy is None:
         policy = make_policy(config.policy, config.active_horizon_fraction)
     own = estimator is None
-    est = estimator or make_estimator(model, config, stream_seed(seed, "estimator"), sim_config)
+    check_instance(prior, PriorRanges, "prior", optional=True)
+    seed_est = stream_seed(seed, "estimator")
+    est = estimator or make_estimator(model, config, seed_est, sim_config, prior)
     rng = stream(seed, "policy")  # candidates and the policy's choices
     speeds = profile_speeds(sim_config or model.sim_config)
     camera = model.camera
@@ -185,7 +194,9 @@ def infer_simulated(
     """`infer_object` on the testbed: `spec` simulated with the model's testbed settings,
     recentred under the camera, seeded by `seed`, the first push starting from its true pose
     (so the CoM and I_z compare with the truth, reported when `with_truth`); `estimator` as
-    `infer_object`'s. `spec` may be a reference ("catalogue:117", "random:7:0", a spec file).
+    `infer_object`'s, by default under the ranges the testbed draws `spec` from
+    (`identification.prior.generator_prior`). `spec` may be a reference ("catalogue:117",
+    "random:7:0", a spec file).
     Raises ArgumentTypeError / ArgumentValueError naming a wrong argument."""
     from pathlib import Path
 
@@ -212,6 +223,7 @@ def infer_simulated(
             on_push=on_push,
             policy=policy,
             estimator=estimator,
+            prior=generator_prior(spec),
         )
     finally:
         executor.close()

@@ -313,6 +313,11 @@ def _draw(rng: np.random.Generator) -> tuple[ObjectSpec, str, int]:
     return spec, family, redraws
 
 
+def is_random_shape(spec: ObjectSpec) -> bool:
+    """`spec` was drawn here (its name starts ``random:``)."""
+    return (spec.name or "").startswith("random:")
+
+
 def random_object(rng: np.random.Generator) -> ObjectSpec:
     """One object of a random shape with continuous parameters (module docstring), named
     ``random:{family}``."""
