@@ -108,9 +108,10 @@ def test_the_generator_prior_of_random_shapes_holds_every_inertia_they_are_drawn
     from pushtoknow.testbed.object_refs import load_object_spec
     from pushtoknow.testbed.random_shapes import random_objects
 
-    assert generator_prior(load_object_spec("catalogue:5")) == CATALOGUE_PRIOR
+    assert generator_prior(load_object_spec("catalogue:5").name) == CATALOGUE_PRIOR
+    assert generator_prior(None) == CATALOGUE_PRIOR
     specs = random_objects(60, seed=4)
-    assert all(generator_prior(s) == RANDOM_SHAPE_PRIOR for s in specs)
+    assert all(generator_prior(s.name) == RANDOM_SHAPE_PRIOR for s in specs)
     lo, hi = RANDOM_SHAPE_PRIOR.inertia
     inertia = np.array([s.params.inertia for s in specs])
     assert np.all((lo <= inertia) & (inertia <= hi))

@@ -99,7 +99,7 @@ def _run_one(args) -> dict:
         from pushtoknow.identification.recursive import PhysicsFilterConfig
         from pushtoknow.inference.physics_filter import PhysicsFilterEstimator
 
-        physics = PhysicsFilterConfig(workers=1, prior=generator_prior(spec))
+        physics = PhysicsFilterConfig(workers=1, prior=generator_prior(spec.name))
         seed_est = stream_seed(seed, "estimator")
         est = PhysicsFilterEstimator(model, cfg, seed_est, filter_config=physics)
     try:

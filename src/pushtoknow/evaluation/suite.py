@@ -734,7 +734,7 @@ def run_evaluation(
                 continue  # run for the physics row's pushes only
             methods[method] = _method_run(run)
             said = [f"the pushes of {names[0]}:{policy}, replayed"] if given is not None else []
-            ranges = {generator_prior(s) for s in specs[set_name]} - {CATALOGUE_PRIOR}
+            ranges = {generator_prior(s.name) for s in specs[set_name]} - {CATALOGUE_PRIOR}
             said += [f"prior {r.label()}" for r in ranges] if estimator == PHYSICS else []
             if said:
                 notes[method] = "; ".join(said)

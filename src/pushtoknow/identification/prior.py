@@ -29,7 +29,7 @@ from pushtoknow.common.params import (
     normalise_param,
     space_scale,
 )
-from pushtoknow.testbed.objects import FRICTION_LIMIT, MAX_MASS, ObjectSpec
+from pushtoknow.testbed.objects import FRICTION_LIMIT, MAX_MASS
 from pushtoknow.testbed.random_shapes import INERTIA_RANGE as RANDOM_SHAPE_INERTIA
 from pushtoknow.testbed.random_shapes import is_random_shape
 
@@ -103,10 +103,11 @@ EVERYDAY_PRIOR = PriorRanges(mass=(0.05, 5.0), friction=(0.05, 1.2), inertia=(5e
 RANDOM_SHAPE_PRIOR = PriorRanges(inertia=RANDOM_SHAPE_INERTIA)
 
 
-def generator_prior(spec: ObjectSpec) -> PriorRanges:
-    """The ranges the testbed draws `spec` from: the random shapes' (`RANDOM_SHAPE_PRIOR`) or
-    the catalogue's (catalogue and novel objects, spec files)."""
-    return RANDOM_SHAPE_PRIOR if is_random_shape(spec) else CATALOGUE_PRIOR
+def generator_prior(name: str | None) -> PriorRanges:
+    """The ranges the testbed draws the object called `name` (`ObjectSpec.name`) from: the
+    random shapes' (`RANDOM_SHAPE_PRIOR`) or the catalogue's (catalogue and novel objects, spec
+    files)."""
+    return RANDOM_SHAPE_PRIOR if is_random_shape(name) else CATALOGUE_PRIOR
 
 
 def prior_moments(ranges: PriorRanges = CATALOGUE_PRIOR) -> tuple[np.ndarray, np.ndarray]:

@@ -15,7 +15,7 @@ import yaml
 
 from pushtoknow.common.errors import DatasetError, IdentificationError, ObjectSpecError
 from pushtoknow.common.frozen_config import read_utf8
-from pushtoknow.identification.prior import CATALOGUE_PRIOR, EVERYDAY_PRIOR, PriorRanges
+from pushtoknow.identification.prior import EVERYDAY_PRIOR, PriorRanges, generator_prior
 from pushtoknow.identification.replay import ReplayScene
 from pushtoknow.testbed.objects import NOVEL_SHAPES, recentred_legacy_shape, resolve_shape
 from pushtoknow.testbed.shapes import CATALOGUE_SHAPES, footprint_from_shape
@@ -37,7 +37,7 @@ class RecordedObject:
     know one) or None; sim_config: the settings the pushes were recorded with (for a recording
     or bag: the testbed's, with its clock, pad radius, force noise and push length); notes:
     what the reader changed (a resampling, a moved object frame); prior: the ranges of m, μ
-    and I_z to start from (`prior.CATALOGUE_PRIOR` for objects the testbed drew and simulated,
+    and I_z to start from (`prior.generator_prior` for objects the testbed drew and simulated,
     `prior.EVERYDAY_PRIOR` for real ones: recordings, bags, imported MIT Push pushes)."""
 
     name: str
@@ -207,7 +207,7 @@ def load_recorded_objects(
                         sim_config=recorded_clock(sim_config, scales, f"{shard} object {key}"),
                         prior=EVERYDAY_PRIOR
                         if any(TIME_SCALE_ATTR in pushes[k].attrs for k in keys)
-                        else CATALOGUE_PRIOR,
+                        else generator_prior(d.get("name")),
                     )
                 )
     if not out:

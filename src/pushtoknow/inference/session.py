@@ -223,7 +223,7 @@ def infer_simulated(
             on_push=on_push,
             policy=policy,
             estimator=estimator,
-            prior=generator_prior(spec),
+            prior=generator_prior(spec.name),
         )
     finally:
         executor.close()

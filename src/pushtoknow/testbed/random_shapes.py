@@ -313,9 +313,9 @@ def _draw(rng: np.random.Generator) -> tuple[ObjectSpec, str, int]:
     return spec, family, redraws
 
 
-def is_random_shape(spec: ObjectSpec) -> bool:
-    """`spec` was drawn here (its name starts ``random:``)."""
-    return (spec.name or "").startswith("random:")
+def is_random_shape(name: str | None) -> bool:
+    """An object called `name` (`ObjectSpec.name`) was drawn here: it starts ``random:``."""
+    return (name or "").startswith("random:")
 
 
 def random_object(rng: np.random.Generator) -> ObjectSpec:
