@@ -18,7 +18,7 @@ from __future__ import annotations
 from typing import Annotated
 
 import numpy as np
-from pydantic import AfterValidator
+from pydantic import AfterValidator, Field
 from scipy.stats import truncnorm
 
 from pushtoknow.common.frozen_config import Config
@@ -30,7 +30,6 @@ from pushtoknow.common.params import (
     space_scale,
 )
 from pushtoknow.testbed.objects import FRICTION_LIMIT, MAX_MASS
-from pushtoknow.testbed.random_shapes import INERTIA_RANGE as RANDOM_SHAPE_INERTIA
 from pushtoknow.testbed.random_shapes import is_random_shape
 
 
@@ -80,6 +79,13 @@ class PriorRanges(Config):
     inertia: Annotated[tuple[float, float], AfterValidator(_range("inertia", 1e-8, 10.0))] = (
         PARAM_RANGES["inertia"]
     )
+    inertia_follows_footprint: bool = Field(
+        False,
+        description="once the footprint is seen, I_z is its plate's (m·k², `footprint_prior`) "
+        "and the I_z range only describes it before (objects whose I_z follows their shape, "
+        "as the random shapes'); False: the range bounds I_z after that too (catalogue and "
+        "novel objects draw I_z from it whatever their size)",
+    )
 
     def range_of(self, name: str) -> tuple[float, float]:
         """The (low, high) range of parameter `name` (`common.params.PARAM_NAMES`)."""
@@ -90,17 +96,18 @@ class PriorRanges(Config):
     def label(self) -> str:
         """One line: 'm 0.05–5 kg, μ 0.05–1.2, I_z 1e-05–0.05 kg·m²'."""
         (m0, m1), (f0, f1), (i0, i1) = self.mass, self.friction, self.inertia
-        return f"m {m0:g}–{m1:g} kg, μ {f0:g}–{f1:g}, I_z {i0:g}–{i1:g} kg·m²"
+        shape = " (then the footprint's plate)" if self.inertia_follows_footprint else ""
+        return f"m {m0:g}–{m1:g} kg, μ {f0:g}–{f1:g}, I_z {i0:g}–{i1:g} kg·m²{shape}"
 
 
 CATALOGUE_PRIOR = PriorRanges()
 # everyday objects and surfaces: 50 g–5 kg; μ from PTFE-like (0.05) to rubber (1.2); I_z from a
 # 50 g, 3 cm puck to a 5 kg, 30 cm plate
 EVERYDAY_PRIOR = PriorRanges(mass=(0.05, 5.0), friction=(0.05, 1.2), inertia=(5e-6, 0.08))
-# the random-shape objects' (`testbed.random_shapes`): m and μ the catalogue's, I_z any the
-# generator draws (m·k² for a radius of gyration near the footprint's plate, not the catalogue's
-# I_z range)
-RANDOM_SHAPE_PRIOR = PriorRanges(inertia=RANDOM_SHAPE_INERTIA)
+# the random-shape objects' (`testbed.random_shapes`): the catalogue's ranges, but I_z m·k² for a
+# radius of gyration near the footprint's plate once that is seen, inside the catalogue's I_z
+# range or not
+RANDOM_SHAPE_PRIOR = PriorRanges(inertia_follows_footprint=True)
 
 
 def generator_prior(name: str | None) -> PriorRanges:
@@ -186,7 +193,8 @@ def inertia_moments(
     w = weights / weights.sum()
     centre = log_m + 2.0 * np.log(gyration_radius)
     sd = 2.0 * GYRATION_SPREAD
-    a, b = (np.log(inertia_range[0]) - centre) / sd, (np.log(inertia_range[1]) - centre) / sd
+    with np.errstate(divide="ignore"):  # a range from 0: no lower bound
+        a, b = (np.log(inertia_range[0]) - centre) / sd, (np.log(inertia_range[1]) - centre) / sd
     mean_c, var_c = truncnorm.stats(a, b, loc=centre, scale=sd, moments="mv")
     mean_iz = float(w @ mean_c)
     var_iz = float(w @ (var_c + mean_c**2)) - mean_iz**2
@@ -201,7 +209,8 @@ def footprint_prior(
     footprint is seen: m and μ as `prior_moments(ranges)`; the CoM uniform over `com_region` (V, 2),
     the footprint's convex hull less the testbed's margin (where any mass distribution puts
     it); log I_z given m about log m + 2 log k, k the footprint's uniform-plate radius of
-    gyration `gyration_radius` (m), within the prior's I_z range (`inertia_moments`).
+    gyration `gyration_radius` (m), within the prior's I_z range (`inertia_moments`) unless
+    `ranges.inertia_follows_footprint`.
     Normalised values of a CoM or I_z beyond the catalogue ranges lie beyond ±1."""
     mean, cov = prior_moments(ranges)
     scale = space_scale()
@@ -214,7 +223,8 @@ def footprint_prior(
     s_c = scale[i_cx : i_cx + 2]
     mean[i_cx : i_cx + 2] = [normalise_param("com_x", c[0]), normalise_param("com_y", c[1])]
     cov[i_cx : i_cx + 2, i_cx : i_cx + 2] = c_cov / np.outer(s_c, s_c)
-    mean_iz, var_iz, cov_m_iz = inertia_moments(ranges.mass, ranges.inertia, gyration_radius)
+    bounds = (0.0, np.inf) if ranges.inertia_follows_footprint else ranges.inertia
+    mean_iz, var_iz, cov_m_iz = inertia_moments(ranges.mass, bounds, gyration_radius)
     mean[i_iz] = normalise_param("inertia", float(np.exp(mean_iz)))
     cov[i_iz, i_iz] = var_iz / scale[i_iz] ** 2
     cov[i_iz, i_m] = cov[i_m, i_iz] = cov_m_iz / (scale[i_iz] * scale[i_m])

@@ -46,12 +46,6 @@ MIN_EDGE = 0.002  # m, shortest polygon edge
 MIN_ANGLE_DEG = 12.0  # smallest interior angle (no needles)
 GYRATION_BAND = (0.7, 1.3)  # k / k_uniform: the physically sensible radii of gyration
 MAX_SHAPE_TRIES = 200
-# kg·m²: every I_z the generator can draw lies within, from the lightest mass at the smallest
-# radius of gyration the testbed simulates to the heaviest mass with all of it MAX_EXTENT away
-INERTIA_RANGE = (
-    PARAM_RANGES["mass"][0] * MIN_GYRATION_RADIUS**2,
-    PARAM_RANGES["mass"][1] * MAX_EXTENT**2,
-)
 MAX_COM_TRIES = 2000
 
 
