@@ -26,6 +26,7 @@ from pushtoknow.common.params import (
     LOG_PARAMS,
     PARAM_NAMES,
     PARAM_RANGES,
+    denormalise_params,
     normalise_param,
     space_scale,
 )
@@ -102,8 +103,10 @@ class PriorRanges(Config):
 
 CATALOGUE_PRIOR = PriorRanges()
 # everyday objects and surfaces: 50 g–5 kg; μ from PTFE-like (0.05) to rubber (1.2); I_z from a
-# 50 g, 3 cm puck to a 5 kg, 30 cm plate
-EVERYDAY_PRIOR = PriorRanges(mass=(0.05, 5.0), friction=(0.05, 1.2), inertia=(5e-6, 0.08))
+# 50 g, 3 cm puck to a 5 kg, 30 cm plate before the outline is seen, then the outline's plate
+EVERYDAY_PRIOR = PriorRanges(
+    mass=(0.05, 5.0), friction=(0.05, 1.2), inertia=(5e-6, 0.08), inertia_follows_footprint=True
+)
 # the random-shape objects' (`testbed.random_shapes`): the catalogue's ranges, but I_z m·k² for a
 # radius of gyration near the footprint's plate once that is seen, inside the catalogue's I_z
 # range or not
@@ -223,8 +226,12 @@ def footprint_prior(
     s_c = scale[i_cx : i_cx + 2]
     mean[i_cx : i_cx + 2] = [normalise_param("com_x", c[0]), normalise_param("com_y", c[1])]
     cov[i_cx : i_cx + 2, i_cx : i_cx + 2] = c_cov / np.outer(s_c, s_c)
-    bounds = (0.0, np.inf) if ranges.inertia_follows_footprint else ranges.inertia
-    mean_iz, var_iz, cov_m_iz = inertia_moments(ranges.mass, bounds, gyration_radius)
+    if ranges.inertia_follows_footprint:  # the plate relation unbounded, in closed form
+        var_log_m = cov[i_m, i_m] * scale[i_m] ** 2
+        mean_iz = float(np.log(denormalise_params(mean)[i_m])) + 2.0 * np.log(gyration_radius)
+        var_iz, cov_m_iz = var_log_m + (2.0 * GYRATION_SPREAD) ** 2, var_log_m
+    else:
+        mean_iz, var_iz, cov_m_iz = inertia_moments(ranges.mass, ranges.inertia, gyration_radius)
     mean[i_iz] = normalise_param("inertia", float(np.exp(mean_iz)))
     cov[i_iz, i_iz] = var_iz / scale[i_iz] ** 2
     cov[i_iz, i_m] = cov[i_m, i_iz] = cov_m_iz / (scale[i_iz] * scale[i_m])
