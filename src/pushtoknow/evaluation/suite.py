@@ -681,6 +681,8 @@ def run_evaluation(
         methods: dict[str, MethodRun] = {}
         base: HeldoutRun | None = None
         learned: dict[str, HeldoutRun] = {}  # the first model's runs, by policy
+        # the physics estimator's priors here other than the catalogue's (`generator_prior`)
+        set_priors = {generator_prior(s.name) for s in specs[set_name]} - {CATALOGUE_PRIOR}
         wanted = sets if cfg.physics_sets is None else cfg.physics_sets
         physics = cfg.physics_policies if set_name in wanted else ()
         replays = [  # physics rows on the first model's pushes: their learned run is needed
@@ -734,8 +736,7 @@ def run_evaluation(
                 continue  # run for the physics row's pushes only
             methods[method] = _method_run(run)
             said = [f"the pushes of {names[0]}:{policy}, replayed"] if given is not None else []
-            ranges = {generator_prior(s.name) for s in specs[set_name]} - {CATALOGUE_PRIOR}
-            said += [f"prior {r.label()}" for r in ranges] if estimator == PHYSICS else []
+            said += [f"prior {r.label()}" for r in set_priors] if estimator == PHYSICS else []
             if said:
                 notes[method] = "; ".join(said)
         if PRIOR not in old:

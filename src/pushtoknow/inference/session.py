@@ -117,11 +117,11 @@ def infer_object(
     )  # fmt: skip
     check_instance(sim_config, SimConfig, "sim_config", optional=True)
     check_instance(estimator, Estimator, "estimator", optional=True)
+    check_instance(prior, PriorRanges, "prior", optional=True)
     check_profiles(model, config)
     if policy is None:
         policy = make_policy(config.policy, config.active_horizon_fraction)
     own = estimator is None
-    check_instance(prior, PriorRanges, "prior", optional=True)
     seed_est = stream_seed(seed, "estimator")
     est = estimator or make_estimator(model, config, seed_est, sim_config, prior)
     rng = stream(seed, "policy")  # candidates and the policy's choices
