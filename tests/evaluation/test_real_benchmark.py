@@ -213,6 +213,19 @@ def test_json_keys_truth_and_skipped_push(bench):
     assert f["vt-addf"]["std"] == 0.0 and f["vt-addf"]["spread"] is None  # one object
 
 
+def test_force_balance_rows(bench):
+    """m from force and acceleration: one row per object and per used push. The synthetic
+    probe is never clear of the outline (the missed push runs through it), so its own mass is
+    unknown and m is not identified, saying so."""
+    assert bench["probe_mass"] == {"mass": None, "std": None, "samples": 0, "pushes": []}
+    fb = bench["objects"]["abs:rect1"]["force_balance"]
+    o = fb["object"]
+    assert set(o) >= {"mass", "std", "identified", "reason", "band_hz", "z", "covered", "rel_error"}
+    assert not o["identified"] and o["mass"] is None and "probe's mass" in o["reason"]
+    assert [p["file"] for p in fb["pushes"]] == bench["objects"]["abs:rect1"]["files"]
+    assert all(not p["identified"] for p in fb["pushes"])
+
+
 def test_surface_spread_and_deterministic(mit_dir, run_dir, tmp_path, bench):
     """Two objects on one surface: μ's mean, std and spread across them; same seed, same JSON."""
     d = tmp_path / "two"

@@ -127,6 +127,19 @@ def _print(report) -> None:
         for r in rows:
             t.add_row(*r)
         console.print(t)
+    header, rows = report.mass_rows()
+    if rows:
+        pm = report.probe_mass or {}
+        probe = "unknown" if pm.get("mass") is None else f"{pm['mass']:.3f} ± {pm['std']:.2g} kg"
+        t = Table(
+            title=f"m from force and acceleration (probe's own mass {probe}; not fused)",
+            title_justify="left",
+        )
+        for h in header:
+            t.add_column(h, justify="left")
+        for r in rows:
+            t.add_row(*r)
+        console.print(t)
     lines = ["cells: estimate ± std (|z|); * truth outside the 90% interval"]
     for key, o in report.objects.items():
         lines += [f"{key}: skipped {s['file']}: {s['reason']}" for s in o["skipped"]]

@@ -59,11 +59,21 @@ from pushtoknow.common.params import PARAM_NAMES, product_moments
 from pushtoknow.datasets.mit_push import (
     DEFAULT_RATE_HZ,
     MIT_SHAPES,
+    PUSHER_RADIUS,
+    MitPush,
     MitPushMeta,
     check_mit_push,
+    dataset_to_centroid_pose,
     find_mit_push_files,
     mit_object,
     read_mit_push,
+)
+from pushtoknow.identification.force_balance import (
+    ForceBalanceConfig,
+    MassReading,
+    RawPush,
+    inertial_mass,
+    probe_mass,
 )
 from pushtoknow.identification.prior import EVERYDAY_PRIOR, PriorRanges
 from pushtoknow.testbed.sim import PushRecord
@@ -161,7 +171,9 @@ class RealObject:
     m) or None; truth (5,) SI, NaN where unknown; image_records: the pushes with RGB-D for the
     learned filter and the forest (None: none, `image_note` says why); skipped: pushes left
     out, each {"file", "reason"}; friction_reference: `friction_reference`'s dict (MIT only);
-    prior: the ranges of m, μ and I_z the physics filter starts from.
+    prior: the ranges of m, μ and I_z the physics filter starts from; raw_pushes: the used
+    pushes' raw streams (MIT only) for `identification.force_balance`, and probe_pushes every
+    checked push's, those without contact included (their free probe motion weighs the probe).
     """
 
     key: str
@@ -182,6 +194,21 @@ class RealObject:
     friction_reference: dict | None = None
     notes: tuple[str, ...] = ()
     prior: PriorRanges = EVERYDAY_PRIOR
+    raw_pushes: tuple[RawPush, ...] = ()
+    probe_pushes: tuple[RawPush, ...] = ()
+
+
+def _raw_push(push: MitPush) -> RawPush:
+    """A checked MIT push's raw streams for `force_balance`: poses of the centroid frame, the
+    force on the object (the reading tared and negated, `mit_push` module doc)."""
+    raw, shape = push.raw, push.meta.shape
+    pose = raw.object_pose.copy()
+    pose[:, 1:] = dataset_to_centroid_pose(pose[:, 1:], shape)
+    force = raw.ft_wrench[:, :3].copy()
+    force[:, 1:] = -(force[:, 1:] - push.force_offset)
+    return RawPush(
+        push.path.name, raw.tip_pose[:, :3], pose, force, push.obj.polygon, PUSHER_RADIUS
+    )
 
 
 def _group_mit(root: Path) -> dict[tuple[str, str], list[tuple[Path, MitPushMeta]]]:
@@ -213,29 +240,30 @@ def _mit_object(
     sim = mit_sim_config(PHYSICS_RATE_HZ)
     spec = mit_object_spec(shape, 0.5, surface=surface)  # μ unused: shape and rendering only
     renderer = MitRenderer(spec, sim)
-    accepted, skipped, records = [], [], []
+    accepted, skipped, records, raw = [], [], [], []
     try:
         for p, meta in files:
             push = read_mit_push(p, PHYSICS_RATE_HZ)
             check_mit_push(push, contact=False)  # DatasetError: frozen, clocks, sign
+            raw.append(_raw_push(push))
             if not push.contact.any():
                 reason = f"no contact: ‖F‖ never exceeds {push.contact_threshold:g} N"
                 skipped.append({"file": str(p.relative_to(root)), "reason": reason})
                 continue
             rec, _ = convert_push(push, renderer)
             records.append(dataclasses.replace(rec, rgb=None, depth=None))
-            accepted.append((p, meta))
+            accepted.append((p, meta, raw[-1]))
         if not records:
             return None
         obj = mit_object(shape)
         fric = friction_reference(records, obj.mass)  # every accepted push
-        for row, (p, _) in zip(fric["pushes"], accepted, strict=True):
+        for row, (p, _, _) in zip(fric["pushes"], accepted, strict=True):
             row["file"] = str(p.relative_to(root))
         used = accepted[:max_pushes] if max_pushes else accepted
         image_records = None
         if train_speed is not None:
             image_records = []
-            for p, meta in used:
+            for p, meta, _ in used:
                 s = meta.speed / train_speed
                 rec, _ = convert_push(read_mit_push(p, PHYSICS_RATE_HZ * s), renderer, s)
                 image_records.append(rec)
@@ -249,7 +277,7 @@ def _mit_object(
         surface=surface,
         name=shape,
         source="mit-push",
-        files=tuple(str(p.relative_to(root)) for p, _ in used),
+        files=tuple(str(p.relative_to(root)) for p, _, _ in used),
         records=tuple(records[: len(used)]),
         sim_config=sim,
         shape=spec.shape,
@@ -267,6 +295,8 @@ def _mit_object(
         image_note="" if train_speed is not None else "not requested",
         skipped=tuple(skipped),
         friction_reference=fric,
+        raw_pushes=tuple(r for _, _, r in used),
+        probe_pushes=tuple(raw),
         notes=()
         if train_speed is None
         else (
@@ -507,6 +537,35 @@ def _forest_model(forest_data: Path, seed: int, trees: int):
     return ForestBaseline(ForestConfig(n_estimators=trees, seed=seed)).fit(X, Y), len(X)
 
 
+def _mass_row(reading: MassReading, truth: float | None) -> dict:
+    """A force-balance reading as a row: the reading's fields, with interval90, z, covered
+    and rel_error against the truth (None where either is unknown)."""
+    row = reading.to_json()
+    m, sd = reading.mass, reading.std
+    known = m is not None and sd is not None and truth is not None
+    row["interval90"] = None if m is None or sd is None else [m - Z90 * sd, m + Z90 * sd]
+    row["z"] = (truth - m) / sd if known else None  # type: ignore[operator]
+    row["covered"] = abs(row["z"]) <= Z90 if known else None
+    row["rel_error"] = (m - truth) / truth if known else None  # type: ignore[operator]
+    return row
+
+
+def _force_balance(obj: RealObject, probe, config: ForceBalanceConfig) -> dict:
+    """m read off force and acceleration (`identification.force_balance`): the object's
+    pushes together, then each alone at the object's band (where it has one)."""
+    truth = _num(obj.truth[0])
+    whole = inertial_mass(obj.raw_pushes, probe, config)
+    band = whole.band_hz if whole.identified else None
+    pushes = []
+    for f, r in zip(obj.files, obj.raw_pushes, strict=True):
+        if band is None:
+            row = {"file": f, "identified": False, "reason": "the object's m is not identified"}
+        else:
+            row = {"file": f, **_mass_row(inertial_mass([r], probe, config, band), truth)}
+        pushes.append(row)
+    return {"object": _mass_row(whole, truth), "pushes": pushes}
+
+
 # ============================================================================================
 # The benchmark
 # ============================================================================================
@@ -516,8 +575,11 @@ class RealBenchmark:
     "skipped", "truth", "truth_source", "methods": {name: {param: row}}, "mu_m": {"truth",
     "methods": {name: {mean, std, rel_error}}}, "skipped_methods": {name: reason}, "seconds":
     {name: s}, "physics": diagnostics, "vt-addf": {"outside_training": [reason]} where the
-    object lies outside what it was trained on, "friction_reference", "notes"}}; surfaces: {surface:
-    {"objects": [...], "friction": {method: {mean, std, spread, values}}}}; all SI."""
+    object lies outside what it was trained on, "force_balance": {"object": row, "pushes":
+    [row]} where the raw streams are known (m from force and acceleration, `_mass_row`),
+    "friction_reference", "notes"}}; surfaces: {surface: {"objects": [...], "friction":
+    {method: {mean, std, spread, values}}}}; probe_mass: `force_balance.ProbeMass` over every
+    MIT push in the folder (one rig), None without MIT pushes; all SI."""
 
     data_dir: str
     seed: int
@@ -529,6 +591,7 @@ class RealBenchmark:
     empty_objects: tuple = ()
     notes: tuple[str, ...] = ()
     seconds: float = 0.0
+    probe_mass: dict | None = None
 
     def to_json(self) -> dict:
         return {
@@ -540,6 +603,7 @@ class RealBenchmark:
             "params": list(PARAM_NAMES),
             "objects": self.objects,
             "surfaces": self.surfaces,
+            "probe_mass": self.probe_mass,
             "empty_objects": list(self.empty_objects),
             "notes": list(self.notes),
             "seconds": self.seconds,
@@ -595,10 +659,40 @@ class RealBenchmark:
                 rows.append([s, m, f"{f['mean']:.3f} ± {f['std']:.3f}", spread, vals])
         return header, rows
 
+    def mass_rows(self) -> tuple[list[str], list[list[str]]]:
+        """(header, rows): m read off force and acceleration, per object (rows empty without
+        raw streams)."""
+        header = ["object", "m (kg) from force and acceleration", "truth", "band (Hz)", "each push"]
+        rows = []
+        for key, o in self.objects.items():
+            fb = o.get("force_balance")
+            if fb is None:
+                continue
+            r, truth = fb["object"], o["truth"]["mass"]
+            if r["identified"]:
+                z = "" if r["z"] is None else f" ({abs(r['z']):.1f})"
+                miss = "" if r["covered"] in (None, True) else "*"
+                rel = "" if r["rel_error"] is None else f", {100 * r['rel_error']:+.0f}%"
+                cell = f"{r['mass']:.3f} ± {r['std']:.2g}{z}{miss}{rel}"
+                band = f"{min(r['band_hz']):.1f}–{max(r['band_hz']):.1f}"
+            else:
+                cell, band = f"not identified: {r['reason']}", "–"
+            each = [p for p in fb["pushes"] if p["identified"]]
+            per = ", ".join(f"{p['mass']:.2f}" for p in each)
+            pushes = f"{len(each)} of {len(fb['pushes'])} read at the band" + (
+                f": {per}" if per else ""
+            )
+            rows.append([key, cell, "–" if truth is None else f"{truth:.4g}", band, pushes])
+        return header, rows
+
     def table(self) -> str:
-        """The report as markdown: the per-object table and the per-surface μ table."""
+        """The report as markdown: the per-object table, the per-surface μ table and the mass
+        read off force and acceleration."""
         out = []
-        for header, rows in (self.table_rows(), self.surface_rows()):
+        tables = [self.table_rows(), self.surface_rows()]
+        if self.mass_rows()[1]:
+            tables.append(self.mass_rows())
+        for header, rows in tables:
             out.append("| " + " | ".join(header) + " |")
             out.append("|" + "---|" * len(header))
             out += ["| " + " | ".join(r) + " |" for r in rows]
@@ -607,6 +701,19 @@ class RealBenchmark:
             "Cells: estimate ± std (|z|); * the truth lies outside the 90% interval. μ truth: "
             "measured on the pure translations; μ·m: relative error against measured μ × mass."
         )
+        pm = self.probe_mass
+        if pm is not None and self.mass_rows()[1]:
+            probe = (
+                "unknown (no free probe motion)"
+                if pm["mass"] is None
+                else f"{pm['mass']:.3f} ± {pm['std']:.2g} kg from {pm['samples']} free samples of "
+                f"{len(pm['pushes'])} pushes"
+            )
+            out.append(
+                "m from force and acceleration (`identification.force_balance`): Re H of force "
+                "over acceleration in the coherent band, less the probe's mass, "
+                f"{probe}; not fused into any estimator."
+            )
         return "\n".join(out) + "\n"
 
     def results_section(self, command: str) -> str:
@@ -724,6 +831,9 @@ def evaluate_real(
     found, empty = find_real_objects(Path(data_dir), max_pushes, train_speed)
     say = progress or (lambda text: None)
     runners = {"physics": functools.partial(_physics, prior=prior), "vt-addf": _learned}
+    balance = ForceBalanceConfig()
+    probe_pushes = [r for o in found for r in o.probe_pushes]
+    probe = probe_mass(probe_pushes, balance) if probe_pushes else None
     objects = {}
     for obj in found:
         methods, mu_m, skipped_methods, seconds, extra = {}, {}, {}, {}, {}
@@ -771,6 +881,7 @@ def evaluate_real(
             "skipped_methods": skipped_methods,
             "seconds": seconds,
             **extra,
+            **({"force_balance": _force_balance(obj, probe, balance)} if obj.raw_pushes else {}),
             "friction_reference": obj.friction_reference,
             "notes": list(obj.notes),
         }
@@ -795,4 +906,5 @@ def evaluate_real(
         empty_objects=tuple(empty),
         notes=tuple(notes),
         seconds=time.perf_counter() - t_start,
+        probe_mass=None if probe is None else probe.to_json(),
     )
