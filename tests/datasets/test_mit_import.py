@@ -443,3 +443,35 @@ def test_no_match_names_directory_and_filters(synth_dir, tmp_path):
     empty.mkdir()
     with pytest.raises(DatasetError, match="no MIT Push files"):
         import_mit_dataset(empty, tmp_path / "o", progress=False)
+
+
+def test_fine_pusher_follows_the_raw_tip_without_its_stamp_jitter(tmp_path):
+    """The raw tip stream on the record's clock, shifted: 4 ms apart from one sample before the
+    first to one after the last, on the tip's path (a moving average of a straight line is the
+    line), its speed steady where the raw rows', read between jittered stamps, spike."""
+    from pushtoknow.datasets.mit_import import FINE_PERIOD, fine_pusher
+
+    streams = _streams()
+    rng = np.random.default_rng(0)
+    tip = streams["tip_pose"].copy()
+    tip[1:-1, 0] += rng.uniform(-1.5e-3, 1.5e-3, len(tip) - 2)  # stamps jitter, rows do not
+    streams["tip_pose"] = tip
+    push = read_mit_push(_write(tmp_path / _name(), streams))
+    shift = np.array([0.1, -0.2])
+    fine = fine_pusher(push, shift)
+    t = fine[:, 0]
+    np.testing.assert_allclose(np.diff(t), FINE_PERIOD, atol=1e-9)
+    assert t[0] == pytest.approx(0.0, abs=FINE_PERIOD)  # the raw stream starts at t_start
+    assert t[-1] == pytest.approx(push.times[-1] + 0.1, abs=FINE_PERIOD)
+    u = np.array([math.cos(THETA0), math.sin(THETA0)])
+    true_xy = C0 - (RECT3_HALF_X + PUSHER_RADIUS + GAP) * u + V * np.clip(
+        t - T_MOVE, 0.0, T_STOP - T_MOVE
+    )[:, None] * u  # fmt: skip
+    steady = (t > T_MOVE + 0.05) & (t < T_STOP - 0.05)
+    # within the stamps' jitter × speed (75 µm), averaged over 5 rows
+    np.testing.assert_allclose(fine[steady, 1:] - shift, true_xy[steady], atol=5e-5)
+    speed = np.linalg.norm(np.diff(fine[:, 1:], axis=0), axis=1) / FINE_PERIOD
+    raw_speed = np.linalg.norm(np.diff(tip[:, 1:3], axis=0), axis=1) / np.diff(tip[:, 0])
+    moving = (tip[:-1, 0] - T0 > T_MOVE + 0.05) & (tip[:-1, 0] - T0 < T_STOP - 0.05)
+    assert raw_speed[moving].max() > 2 * V
+    assert speed[steady[:-1] & steady[1:]].max() < 1.3 * V

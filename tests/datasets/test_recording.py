@@ -355,3 +355,23 @@ def test_pusher_friction_is_read_checked_and_reaches_the_replay_settings(tmp_pat
     assert obj.prior == EVERYDAY_PRIOR  # a recording is of a real object
     _check_fails(_write_raw(tmp_path / "bad.h5", [_synthetic()], pusher_friction=-0.1),
                  "pusher_friction=-0.1")  # fmt: skip
+
+
+def test_a_finer_pusher_track_reaches_the_replay_only_where_the_pad_track_is_replayed(tiny):
+    """`PushRecord.pusher_fine` drives a replayed pad track (a real pusher's); a push replayed
+    by its own profile has no pad track and ignores it."""
+    import dataclasses
+
+    from pushtoknow.identification.fit import tracks_from_records
+
+    rec = _episode(tiny).records[0]
+    fine = np.column_stack([rec.time, rec.pusher])
+    short = dataclasses.replace(
+        rec, time=rec.time[:15], pose=rec.pose[:15], tactile=rec.tactile[:15],
+        force_clean=rec.force_clean[:15], pusher=rec.pusher[:15], rgb=None, depth=None,
+        s0=None, pusher_fine=fine[:20],
+    )  # fmt: skip
+    whole = dataclasses.replace(rec, rgb=None, depth=None, s0=None, pusher_fine=fine)
+    long_track, short_track = tracks_from_records([whole, short], SHORT)
+    assert long_track.pad is None and long_track.pad_fine is None
+    np.testing.assert_array_equal(short_track.pad_fine, fine[:20])

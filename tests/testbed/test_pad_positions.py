@@ -98,3 +98,62 @@ def test_a_pad_track_of_the_wrong_shape_or_not_finite_is_refused():
             ex.sim.execute(push, np.random.default_rng(0), render=False, pad_track=track)
     finally:
         ex.close()
+
+
+def _replay(push, rec, **kw):
+    ex = SimulatedExecutor(load_object_spec("catalogue:412"), FAST, seed=0, randomise_pose=False)
+    try:
+        ex.sim.reset(tuple(rec.pose[0]))
+        return ex.sim.execute(push, np.random.default_rng(0), render=False, **kw)
+    finally:
+        ex.close()
+
+
+def test_a_fine_pad_track_at_the_sample_times_replays_as_the_track_itself():
+    """`pad_fine` rows at the samples' own times describe the same piecewise-linear pad as
+    `pad_track`: the same push, to rounding (which pushing grows to ~1e-6 over a push)."""
+    push = Push((FACE_X, 0.01), math.pi - 0.3, "constant", 0.03)
+    rec = _record(push)
+    fine = np.column_stack([rec.time, rec.pusher])
+    coarse = _replay(push, rec, pad_track=rec.pusher)
+    again = _replay(push, rec, pad_track=rec.pusher, pad_fine=fine)
+    np.testing.assert_allclose(again.pusher, coarse.pusher, atol=1e-9)
+    np.testing.assert_allclose(again.pose, coarse.pose, atol=1e-5)
+    np.testing.assert_allclose(again.force_clean, coarse.force_clean, atol=1e-3)
+
+
+def test_a_pad_that_stops_between_samples_follows_its_fine_track():
+    """A pad stopping at 0.65 s: linear between 10 Hz samples it creeps on until 0.7 s and
+    keeps pushing through sample 7's window; on its fine track it stops at 0.65 s, so the
+    object is pushed for half that window, with about half the mean force."""
+    push = Push((FACE_X, 0.0), math.pi, "constant", 0.03)
+    rec = _record(push)
+    start, u = rec.pusher[0], np.array([-1.0, 0.0])
+    t_fine = np.arange(0.0, 1.5 + 1e-9, 0.004)
+    travel = 0.05 * np.clip(t_fine - 0.1, 0.0, 0.55)  # 50 mm/s from 0.1 s to 0.65 s
+    fine = np.column_stack([t_fine, start + travel[:, None] * u])
+    coarse_track = start + (0.05 * np.clip(rec.time - 0.1, 0.0, 0.55))[:, None] * u
+    coarse = _replay(push, rec, pad_track=coarse_track)
+    stepped = _replay(push, rec, pad_track=coarse_track, pad_fine=fine)
+    np.testing.assert_allclose(stepped.pusher, coarse.pusher, atol=1e-5)  # same at samples
+    f_coarse, f_fine = (np.linalg.norm(r.force_clean[7]) for r in (coarse, stepped))
+    steady = np.linalg.norm(coarse.force_clean[5])
+    assert f_coarse == pytest.approx(steady, rel=0.25)
+    assert f_fine < 0.75 * f_coarse
+
+
+def test_a_bad_fine_pad_track_is_refused():
+    ex = SimulatedExecutor(load_object_spec("catalogue:412"), FAST, seed=0, randomise_pose=False)
+    push = Push((FACE_X, 0.0), math.pi, "constant", 0.03)
+    track = np.zeros((5, 2))
+    go = np.random.default_rng(0)
+    try:
+        with pytest.raises(ValueError, match="needs pad_track"):
+            ex.sim.execute(push, go, render=False, pad_fine=np.zeros((3, 3)))
+        with pytest.raises(ValueError, match="must be"):
+            ex.sim.execute(push, go, render=False, pad_track=track, pad_fine=np.zeros((3, 2)))
+        backwards = np.array([[0.0, 0, 0], [0.2, 0, 0], [0.1, 0, 0]])
+        with pytest.raises(ValueError, match="increasing"):
+            ex.sim.execute(push, go, render=False, pad_track=track, pad_fine=backwards)
+    finally:
+        ex.close()

@@ -42,7 +42,10 @@ Conventions of the converted data (all SI):
   have no noiseless force: ``force_clean`` is None (not stored). Sample 0 differs
   from the simulator's, which is zero: it is the force of the window before t_start when the
   force stream has samples there, else the first force reading (see `read_mit_push`).
-- **Pusher** = tip positions (shifted); the pad is rendered with the probe's radius.
+- **Pusher** = tip positions (shifted); the pad is rendered with the probe's radius. The raw
+  tip stream (shifted, on the record's clock, resampled at 4 ms and averaged over 20 ms, as its
+  stamps jitter) is kept as `PushRecord.pusher_fine`, so a replay drives the pad at that rate
+  rather than linearly between 10 Hz samples.
 - The camera model (`CameraConfig`) is the simulator's default, 64 × 64 px, overhead at 0.75 m.
 - **Time rescaling (optional, ``as_speed``; off by default).** A model trained on pushes at
   speed v_train sees, per 10 Hz step, a pusher displacement of v_train / rate. A recording at
@@ -283,6 +286,28 @@ class MitRenderer:
         self.sim.close()
 
 
+FINE_PERIOD = 0.004  # s: the clock `fine_pusher` resamples the raw tip stream on
+FINE_SMOOTHING = 5  # samples (20 ms): the raw tip stamps jitter by ±3 ms (spacing 1.2–6.6 ms)
+
+
+def fine_pusher(push: MitPush, shift: np.ndarray, time_scale: float = 1.0) -> np.ndarray | None:
+    """(N, 3) [t, x, y] the raw tip stream, shifted, on the record's clock (times × s) from one
+    sample before the first to one after the last: resampled every `FINE_PERIOD` s and averaged
+    over `FINE_SMOOTHING` samples, as its timestamps jitter (speeds read between two rows
+    would spike to 2-3 × the push's). None when that leaves fewer than 2 rows."""
+    tip = push.raw.tip_pose
+    t_raw = tip[:, 0] - push.t0
+    t = np.arange(-1.0 / push.rate, push.times[-1] + 1.0 / push.rate + 1e-9, FINE_PERIOD)
+    t = t[(t >= t_raw[0]) & (t <= t_raw[-1])]
+    if len(t) < max(2, FINE_SMOOTHING):
+        return None
+    kernel = np.ones(FINE_SMOOTHING) / FINE_SMOOTHING
+    xy = [np.interp(t, t_raw, tip[:, i]) for i in (1, 2)]
+    pad = FINE_SMOOTHING // 2
+    xy = [np.convolve(np.pad(v, pad, mode="edge"), kernel, mode="valid") for v in xy]
+    return np.column_stack([t * float(time_scale), xy[0] + shift[0], xy[1] + shift[1]])
+
+
 def convert_push(
     push: MitPush, renderer: MitRenderer, time_scale: float = 1.0
 ) -> tuple[PushRecord, dict]:
@@ -302,6 +327,7 @@ def convert_push(
     pusher = push.tip_pose + shift
     rgb, depth, s0, outline = renderer.render(pose, pusher)
     force = np.asarray(push.force, dtype=np.float64)
+    pusher_fine = fine_pusher(push, shift, time_scale)
     record = PushRecord(
         push=push_action(push, shift, time_scale),
         time=np.asarray(push.times, dtype=np.float64) * float(time_scale),
@@ -313,6 +339,7 @@ def convert_push(
         depth=depth,
         s0=s0,
         outline_mask=outline,
+        pusher_fine=pusher_fine,
     )
     mu = push_friction(push)
     attrs = {

@@ -10,6 +10,7 @@ complete, so a finished shard is never half-written. Layout:
         time (T,) s · pose (T, 3) x, y, θ (unwrapped) · tactile (T, 3) F_x, F_y (N), contact
         force_clean (T, 2) N (simulated pushes only) · pusher (T, 2) m · s0 (H, W) bool
         rgb (T, H, W, 3) uint8 · depth (T, H, W) float16 metres (±0.3 mm at 0.75 m)
+        pusher_fine (N, 3) [t s, x m, y m] (a real pusher at its recorder's rate, where known)
 Image datasets are chunked one frame per chunk and gzip-compressed. Integrity: every dataset
 carries HDF5's Fletcher-32 checksum (a corrupt chunk fails to read, naming the dataset), and
 `content_sha256` digests the objects' attributes and arrays (`content_digest`), so
@@ -115,6 +116,8 @@ def _shard_bytes(
                 p.create_dataset("s0", data=r.s0, **COMPRESSION)
                 if r.outline_mask is not None:
                     p.create_dataset("outline_mask", data=r.outline_mask, **COMPRESSION)
+                if r.pusher_fine is not None:
+                    p.create_dataset("pusher_fine", data=r.pusher_fine, **CHECKSUM)
                 T, H, W = r.depth.shape
                 p.create_dataset("rgb", data=r.rgb, chunks=(1, H, W, 3), **COMPRESSION)
                 p.create_dataset(
@@ -268,9 +271,11 @@ def read_push(path: Path, grp: h5py.Group, images: bool = True) -> PushRecord:
         rgb = _read(path, grp, "rgb")
         depth = _read(path, grp, "depth").astype(np.float32)
     outline = _read(path, grp, "outline_mask") if "outline_mask" in grp else None
+    fine = _read(path, grp, "pusher_fine") if "pusher_fine" in grp else None
     return PushRecord(
-        push=push, rgb=rgb, depth=depth, s0=_read(path, grp, "s0"), outline_mask=outline, **fields
-    )
+        push=push, rgb=rgb, depth=depth, s0=_read(path, grp, "s0"), outline_mask=outline,
+        pusher_fine=fine, **fields,
+    )  # fmt: skip
 
 
 def read_shard(path: Path, images: bool = True) -> list[ObjectEpisode]:

@@ -199,7 +199,8 @@ def tracks_from_records(records: Sequence[PushRecord], sim_config: SimConfig) ->
     """The pushes to replay. A push whose recorded pad track follows its speed profile (within
     `TRACK_TOLERANCE`) over the settings' whole horizon (every simulated push) is replayed with
     that profile from its recorded start; any other (a real pusher's, a shorter one) is
-    replayed along its recorded pad track. Raises
+    replayed along its recorded pad track, at the recorder's own rate where the record holds
+    it (`PushRecord.pusher_fine`). Raises
     IdentificationError if there are none, or if a push is too short or not finite."""
     if not records:
         raise IdentificationError("no pushes to identify from")
@@ -226,6 +227,7 @@ def tracks_from_records(records: Sequence[PushRecord], sim_config: SimConfig) ->
                 r.tactile[:, :2],
                 r.pose,
                 None if follows else r.pusher.copy(),
+                None if follows or r.pusher_fine is None else r.pusher_fine.copy(),
             )
         )
     return tracks

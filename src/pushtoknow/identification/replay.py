@@ -55,7 +55,8 @@ class PushTrack:
     tactile force (N, world, by the pad on the object); pose (T, 3): measured pose track;
     pad (T, 2) or None: the recorded pad track to drive the pad along (m, world), for a push
     that does not follow the testbed's speed profiles (a real pusher); None replays the
-    push's profile from `start`.
+    push's profile from `start`; pad_fine (N, 3) [t, x, y] or None: the same pusher at its
+    recorder's finer rate, which the pad then follows (`PushRecord.pusher_fine`).
     """
 
     push: Push
@@ -64,6 +65,7 @@ class PushTrack:
     force: np.ndarray
     pose: np.ndarray
     pad: np.ndarray | None = None
+    pad_fine: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -165,6 +167,7 @@ def simulate_track(scene: ReplayScene, phi: np.ndarray, track: PushTrack) -> np.
         start=track.start,
         stop_at_rest=scene.stop_at_rest,
         pad_track=track.pad,
+        pad_fine=None if track.pad is None else track.pad_fine,
     )
     pose = rec.pose.copy()
     if dx or dy:

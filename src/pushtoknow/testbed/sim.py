@@ -41,6 +41,9 @@ class PushRecord:
     resolution (k = `CameraConfig.outline_scale`). Images are None where not recorded.
     What only the simulator knows: force_clean: (T, 2) noiseless force (N; None for a real
     push); trace: optional physics-rate record {"time", "pose", "velocity", "force"}.
+    A real pusher's track at its recorder's own rate: pusher_fine (N, 3) [t (s, the record's
+    clock), x, y] or None; replays drive the pad along it (`PushSimulator.execute`), so a
+    start or stop between two samples is not smeared over the sample.
     """
 
     TRACKS: ClassVar[tuple[str, ...]] = ("time", "pose", "tactile", "force_clean", "pusher")
@@ -56,12 +59,13 @@ class PushRecord:
     s0: np.ndarray | None
     trace: dict | None = field(default=None, repr=False)
     outline_mask: np.ndarray | None = None
+    pusher_fine: np.ndarray | None = field(default=None, repr=False)
 
     def __eq__(self, other) -> bool:
         """Equal when the push and every recorded array are identical (bitwise)."""
         if not isinstance(other, PushRecord) or self.push != other.push:
             return False
-        names = (*self.TRACKS, "rgb", "depth", "s0", "outline_mask")
+        names = (*self.TRACKS, "rgb", "depth", "s0", "outline_mask", "pusher_fine")
         return all(
             (a is None and b is None) or (a is not None and b is not None and np.array_equal(a, b))
             for a, b in ((getattr(self, n), getattr(other, n)) for n in names)
@@ -278,6 +282,7 @@ class PushSimulator:
         start: np.ndarray | None = None,
         stop_at_rest: float | None = None,
         pad_track: np.ndarray | None = None,
+        pad_fine: np.ndarray | None = None,
     ) -> PushRecord:
         """Run one push from the current state; returns its record.
 
@@ -308,6 +313,14 @@ class PushSimulator:
                 raise ValueError("pad_track holds non-finite positions")
             T = len(pad_track)
             start = pad_track[0]
+            if pad_fine is not None:
+                pad_fine = np.asarray(pad_fine, dtype=np.float64)
+                if pad_fine.ndim != 2 or pad_fine.shape[1] != 3 or len(pad_fine) < 2:
+                    raise ValueError(f"pad_fine must be (N ≥ 2, 3), got {pad_fine.shape}")
+                if not np.isfinite(pad_fine).all() or np.any(np.diff(pad_fine[:, 0]) <= 0):
+                    raise ValueError("pad_fine needs finite rows at strictly increasing times")
+        elif pad_fine is not None:
+            raise ValueError("pad_fine needs pad_track")
         else:
             profile = speed_profile(push, self.config.push)
             T = int(round(cfg.push.horizon * rate)) + 1
@@ -340,7 +353,22 @@ class PushSimulator:
             substeps[1:] = np.where(time[:-1] < dynamic_end, cfg.physics.dynamic_substeps, 1)
         step_dt = np.repeat(dt / substeps[1:], steps_per_sample * substeps[1:])
         t_steps = np.concatenate([[0.0], np.cumsum(step_dt)[:-1]])
-        if pad_track is not None:
+        if pad_fine is not None:
+            t_fine = pad_fine[:, 0]
+            pad_pos = np.column_stack([np.interp(t_steps, t_fine, pad_fine[:, i]) for i in (1, 2)])
+            fine_vel = np.diff(pad_fine[:, 1:], axis=0) / np.diff(t_fine)[:, None]  # (N - 1, 2)
+            seg = np.searchsorted(t_fine, t_steps, side="right") - 1
+            inside = (seg >= 0) & (seg < len(fine_vel))
+            pad_vel = np.where(inside[:, None], fine_vel[np.clip(seg, 0, len(fine_vel) - 1)], 0.0)
+            moving_fine = np.flatnonzero(np.any(fine_vel != 0.0, axis=1))
+            t_last = time[-1]
+            pad_stops = (
+                np.inf
+                if len(moving_fine) == 0 or t_fine[moving_fine[-1] + 1] >= t_last
+                else float(t_fine[moving_fine[-1] + 1])
+            )
+            start, vel0 = pad_pos[0], pad_vel[0]
+        elif pad_track is not None:
             pad_pos = np.column_stack([np.interp(t_steps, time, pad_track[:, i]) for i in (0, 1)])
             seg_vel = np.diff(pad_track, axis=0) * rate  # (T - 1, 2)
             pad_vel = np.repeat(seg_vel, steps_per_sample * substeps[1:], axis=0)
