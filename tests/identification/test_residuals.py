@@ -40,3 +40,53 @@ def test_whitening_turns_ar1_covariance_into_the_identity(rho, n, seed):
     both = whiten_ar1(e, rho, [n, n])
     np.testing.assert_allclose(both[:n], whiten_ar1(e[:n], rho, [n]))
     np.testing.assert_allclose(both[n:], whiten_ar1(e[n:], rho, [n]))
+
+
+def test_a_contact_offset_moves_every_pad_track_along_the_push():
+    """`ReplayResiduals.shifted` moves the start, the pad track and the fine pad track (a real
+    pusher's) by the offset along the push, keeping the fine track's times."""
+    import types
+
+    from pushtoknow.identification.replay import PushTrack
+    from pushtoknow.identification.residuals import ReplayResiduals
+    from pushtoknow.testbed.push import Push
+
+    push = Push((0.05, 0.0), np.pi / 2, "constant", 0.02)  # along +y
+    pad = np.array([[0.0, 0.0], [0.0, 0.002]])
+    fine = np.array([[0.0, 0.0, 0.0], [0.05, 0.0, 0.001], [0.1, 0.0, 0.002]])
+    track = PushTrack(push, np.zeros(2), np.zeros(3), np.zeros((2, 2)), np.zeros((2, 3)), pad, fine)
+    (moved,) = ReplayResiduals.shifted(types.SimpleNamespace(tracks=[track]), np.array([0.003]))
+    np.testing.assert_allclose(moved.start, [0.0, 0.003], atol=1e-15)
+    np.testing.assert_allclose(moved.pad, pad + np.array([0.0, 0.003]), atol=1e-15)
+    np.testing.assert_allclose(moved.pad_fine[:, 1:], fine[:, 1:] + [0.0, 0.003], atol=1e-15)
+    np.testing.assert_array_equal(moved.pad_fine[:, 0], fine[:, 0])
+    np.testing.assert_array_equal(track.pad_fine, fine)  # the original is left as it was
+
+
+def test_a_real_pushers_breakaway_sample_carries_no_force_residual():
+    """Replayed along a recorded pad, the sample in which the object starts moving weighs 0
+    (static friction and the probe's inertia, which the replay lacks), even after a probe
+    resting pressed on the object; replayed by its profile, none is dropped."""
+    from pushtoknow.identification.replay import PushTrack
+    from pushtoknow.identification.residuals import breakaway_weights
+    from pushtoknow.testbed.push import Push
+
+    push = Push((0.05, 0.0), np.pi, "constant", 0.02)
+    force = np.array([[0.7, 0.0], [0.7, 0.1], [3.0, 0.2], [2.0, 0.0], [2.1, 0.0]])  # preloaded
+    pose = np.zeros((5, 3))
+    pose[1, 0] = 2e-4  # within the tolerance: still at rest
+    pose[2:, 0] = [0.003, 0.008, 0.013]
+    pad = np.zeros((5, 2))
+    real = PushTrack(push, np.zeros(2), np.zeros(3), force, pose, pad)
+    w = breakaway_weights(real)
+    np.testing.assert_array_equal(w[:, 0], [1, 1, 0, 1, 1])
+    np.testing.assert_array_equal(w[:, 1], w[:, 0])
+    turning = pose.copy()
+    turning[:, 0] = 0.0
+    turning[3:, 2] = 0.01  # a pure rotation breaks away too, a sample later
+    w = breakaway_weights(PushTrack(push, np.zeros(2), np.zeros(3), force, turning, pad))
+    np.testing.assert_array_equal(w[:, 0], [1, 1, 1, 0, 1])
+    simulated = PushTrack(push, np.zeros(2), np.zeros(3), force, pose, None)
+    np.testing.assert_array_equal(breakaway_weights(simulated), 1.0)
+    still = PushTrack(push, np.zeros(2), np.zeros(3), force, np.zeros((5, 3)), pad)
+    np.testing.assert_array_equal(breakaway_weights(still), 1.0)

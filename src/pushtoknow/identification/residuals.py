@@ -15,6 +15,7 @@ from pushtoknow.identification.prior import fit_transform
 from pushtoknow.identification.replay import PushTrack, ReplayScene, RolloutPool, feasible
 
 PENALTY_SCALE = 1e-3  # m of CoM projection (or 0.1 % of I_z excess) per unit penalty residual
+BREAKAWAY_MOTION = 5e-4  # m or rad the pose leaves its start by in a real push's breakaway
 OFFSET_UNIT = 1e-3  # m per unit of a push's contact offset coordinate
 
 
@@ -31,6 +32,26 @@ def rest_weights(pose: np.ndarray, position_tol: float, angle_tol: float) -> np.
     first_rest = int(moving[-1]) + 1 if len(moving) else 0
     w = np.ones(len(pose))
     w[first_rest + 1 :] = 0.0
+    return w
+
+
+def breakaway_weights(track: PushTrack) -> np.ndarray:
+    """(T, 2) weights of a track's force samples: 0 on the sample in which the object starts
+    to move (its pose first leaves the start by more than `BREAKAWAY_MOTION` m or rad) when the
+    track is replayed along a recorded pad (a real pusher), 1 elsewhere. There a real object
+    breaks away from static friction, which the replay's Coulomb friction (one μ) does not have,
+    while the sensor also reads the probe's own inertia: up to 3.5 N over the sliding force on
+    the MIT recordings (docs/DESIGN.md §11). A probe resting pressed on the object before the
+    push is not a breakaway: the force alone cannot tell it."""
+    w = np.ones((len(track.force), 2))
+    if track.pad is not None:
+        pose = np.asarray(track.pose, dtype=np.float64)
+        moved = np.maximum(
+            np.linalg.norm(pose[:, :2] - pose[0, :2], axis=1), np.abs(pose[:, 2] - pose[0, 2])
+        )
+        first = np.flatnonzero(moved > BREAKAWAY_MOTION)
+        if len(first):
+            w[first[0]] = 0.0
     return w
 
 
@@ -57,7 +78,8 @@ class ReplayResiduals:
     (`replay.feasible`). The force's noise is white; the pose track's may be AR(1) with lag-1
     correlation `pose_correlation` (perception's error drifts from frame to frame), its
     residuals whitened (`whiten_ar1`). `rest_tolerance` (m, rad): keep one pose sample of each
-    observed track's final stretch at rest (`rest_weights`); None: every sample counts."""
+    observed track's final stretch at rest (`rest_weights`); None: every sample counts. A real
+    pusher's breakaway sample carries no force residual (`breakaway_weights`)."""
 
     def __init__(
         self,
@@ -77,6 +99,7 @@ class ReplayResiduals:
         self.n_data = self.obs.size
         self.pose_correlation = float(pose_correlation)
         self.weights = np.ones(self.obs.shape)  # (N, 5) per-sample weights of the residuals
+        self.weights[:, :2] = np.concatenate([breakaway_weights(t)[1:] for t in tracks])
         if rest_tolerance is not None:
             self.weights[:, 2:] = np.concatenate(
                 [rest_weights(t.pose, *rest_tolerance)[1:] for t in tracks]
@@ -105,7 +128,11 @@ class ReplayResiduals:
             d = float(s) * tr.push.unit
             start = None if tr.start is None else np.asarray(tr.start) + d
             pad = None if tr.pad is None else np.asarray(tr.pad) + d[None]
-            out.append(dataclasses.replace(tr, start=start, pad=pad))
+            fine = None
+            if tr.pad_fine is not None:
+                fine = np.array(tr.pad_fine, dtype=np.float64)
+                fine[:, 1:] += d[None]
+            out.append(dataclasses.replace(tr, start=start, pad=pad, pad_fine=fine))
         return out
 
     def simulate(self, us: np.ndarray) -> list[np.ndarray]:
