@@ -689,9 +689,10 @@ class RealBenchmark:
         """The report as markdown: the per-object table, the per-surface μ table and the mass
         read off force and acceleration."""
         out = []
+        mass = self.mass_rows()
         tables = [self.table_rows(), self.surface_rows()]
-        if self.mass_rows()[1]:
-            tables.append(self.mass_rows())
+        if mass[1]:
+            tables.append(mass)
         for header, rows in tables:
             out.append("| " + " | ".join(header) + " |")
             out.append("|" + "---|" * len(header))
@@ -702,7 +703,7 @@ class RealBenchmark:
             "measured on the pure translations; μ·m: relative error against measured μ × mass."
         )
         pm = self.probe_mass
-        if pm is not None and self.mass_rows()[1]:
+        if pm is not None and mass[1]:
             probe = (
                 "unknown (no free probe motion)"
                 if pm["mass"] is None

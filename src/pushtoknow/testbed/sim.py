@@ -361,10 +361,9 @@ class PushSimulator:
             inside = (seg >= 0) & (seg < len(fine_vel))
             pad_vel = np.where(inside[:, None], fine_vel[np.clip(seg, 0, len(fine_vel) - 1)], 0.0)
             moving_fine = np.flatnonzero(np.any(fine_vel != 0.0, axis=1))
-            t_last = time[-1]
             pad_stops = (
                 np.inf
-                if len(moving_fine) == 0 or t_fine[moving_fine[-1] + 1] >= t_last
+                if len(moving_fine) == 0 or t_fine[moving_fine[-1] + 1] >= time[-1]
                 else float(t_fine[moving_fine[-1] + 1])
             )
             start, vel0 = pad_pos[0], pad_vel[0]
