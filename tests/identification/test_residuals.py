@@ -63,30 +63,31 @@ def test_a_contact_offset_moves_every_pad_track_along_the_push():
     np.testing.assert_array_equal(track.pad_fine, fine)  # the original is left as it was
 
 
-def test_a_real_pushers_breakaway_sample_carries_no_force_residual():
-    """Replayed along a recorded pad, the sample in which the object starts moving weighs 0
-    (static friction and the probe's inertia, which the replay lacks), even after a probe
-    resting pressed on the object; replayed by its profile, none is dropped."""
+def test_a_real_pusher_holding_the_object_at_rest_carries_no_force_residual():
+    """Replayed along a recorded pad, the force samples up to and including the object's
+    breakaway and after it has come to its final rest weigh 0 (static friction: a preload, the
+    breakaway, a probe left pressed on it), whether it slides or turns; an object that never
+    moves leaves no force sample; replayed by its profile, none is dropped."""
     from pushtoknow.identification.replay import PushTrack
-    from pushtoknow.identification.residuals import breakaway_weights
+    from pushtoknow.identification.residuals import resting_force_weights
     from pushtoknow.testbed.push import Push
 
     push = Push((0.05, 0.0), np.pi, "constant", 0.02)
-    force = np.array([[0.7, 0.0], [0.7, 0.1], [3.0, 0.2], [2.0, 0.0], [2.1, 0.0]])  # preloaded
-    pose = np.zeros((5, 3))
+    force = np.array([[0.7, 0.0], [0.7, 0.1], [3.0, 0.2], [2.0, 0.0], [2.1, 0.0], [1.5, 0.0]])
+    force = np.vstack([force, [[1.4, 0.0], [1.4, 0.0]]])  # preloaded, and pressed at the end
+    pose = np.zeros((8, 3))
     pose[1, 0] = 2e-4  # within the tolerance: still at rest
-    pose[2:, 0] = [0.003, 0.008, 0.013]
-    pad = np.zeros((5, 2))
+    pose[2:, 0] = [0.003, 0.008, 0.013, 0.016, 0.0162, 0.0161]  # at rest from sample 5
+    pad = np.zeros((8, 2))
     real = PushTrack(push, np.zeros(2), np.zeros(3), force, pose, pad)
-    w = breakaway_weights(real)
-    np.testing.assert_array_equal(w[:, 0], [1, 1, 0, 1, 1])
+    w = resting_force_weights(real)
+    np.testing.assert_array_equal(w[:, 0], [0, 0, 0, 1, 1, 1, 0, 0])
     np.testing.assert_array_equal(w[:, 1], w[:, 0])
-    turning = pose.copy()
-    turning[:, 0] = 0.0
-    turning[3:, 2] = 0.01  # a pure rotation breaks away too, a sample later
-    w = breakaway_weights(PushTrack(push, np.zeros(2), np.zeros(3), force, turning, pad))
-    np.testing.assert_array_equal(w[:, 0], [1, 1, 1, 0, 1])
+    turning = np.zeros((8, 3))
+    turning[3:, 2] = [0.01, 0.02, 0.03, 0.04, 0.05]  # a pure rotation, moving to the end
+    w = resting_force_weights(PushTrack(push, np.zeros(2), np.zeros(3), force, turning, pad))
+    np.testing.assert_array_equal(w[:, 0], [0, 0, 0, 0, 1, 1, 1, 1])
     simulated = PushTrack(push, np.zeros(2), np.zeros(3), force, pose, None)
-    np.testing.assert_array_equal(breakaway_weights(simulated), 1.0)
-    still = PushTrack(push, np.zeros(2), np.zeros(3), force, np.zeros((5, 3)), pad)
-    np.testing.assert_array_equal(breakaway_weights(still), 1.0)
+    np.testing.assert_array_equal(resting_force_weights(simulated), 1.0)
+    still = PushTrack(push, np.zeros(2), np.zeros(3), force, np.zeros((8, 3)), pad)
+    np.testing.assert_array_equal(resting_force_weights(still), 0.0)

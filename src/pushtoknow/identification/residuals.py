@@ -15,7 +15,7 @@ from pushtoknow.identification.prior import fit_transform
 from pushtoknow.identification.replay import PushTrack, ReplayScene, RolloutPool, feasible
 
 PENALTY_SCALE = 1e-3  # m of CoM projection (or 0.1 % of I_z excess) per unit penalty residual
-BREAKAWAY_MOTION = 5e-4  # m or rad the pose leaves its start by in a real push's breakaway
+BREAKAWAY_MOTION = 5e-4  # m or rad a real push's object moves by to count as not at rest
 OFFSET_UNIT = 1e-3  # m per unit of a push's contact offset coordinate
 
 
@@ -35,23 +35,34 @@ def rest_weights(pose: np.ndarray, position_tol: float, angle_tol: float) -> np.
     return w
 
 
-def breakaway_weights(track: PushTrack) -> np.ndarray:
-    """(T, 2) weights of a track's force samples: 0 on the sample in which the object starts
-    to move (its pose first leaves the start by more than `BREAKAWAY_MOTION` m or rad) when the
-    track is replayed along a recorded pad (a real pusher), 1 elsewhere. There a real object
-    breaks away from static friction, which the replay's Coulomb friction (one μ) does not have,
-    while the sensor also reads the probe's own inertia: up to 3.5 N over the sliding force on
-    the MIT recordings (docs/DESIGN.md §11). A probe resting pressed on the object before the
-    push is not a breakaway: the force alone cannot tell it."""
+def resting_force_weights(track: PushTrack) -> np.ndarray:
+    """(T, 2) weights of a track's force samples: 0 where a track replayed along a recorded
+    pad (a real pusher) holds the object at rest, 1 elsewhere. At rest are the samples up to
+    and including the one in which the object starts to move (its pose first leaves the start
+    by more than `BREAKAWAY_MOTION` m or rad; all of them if it never does) and those after
+    the one in which it comes to its final rest (within `BREAKAWAY_MOTION` of its last pose).
+    A resting object's force is static friction's, anything up to μ_s·m·g: a probe left
+    pressed on it before or after the push (up to 4.4 N on the MIT recordings), and the
+    breakaway above the sliding force with the probe's own inertia (docs/DESIGN.md §11). The
+    replay's Coulomb friction (one μ) and massless pad have neither. Replayed by its profile
+    (a simulated push), every sample counts."""
     w = np.ones((len(track.force), 2))
-    if track.pad is not None:
-        pose = np.asarray(track.pose, dtype=np.float64)
-        moved = np.maximum(
-            np.linalg.norm(pose[:, :2] - pose[0, :2], axis=1), np.abs(pose[:, 2] - pose[0, 2])
-        )
-        first = np.flatnonzero(moved > BREAKAWAY_MOTION)
-        if len(first):
-            w[first[0]] = 0.0
+    if track.pad is None:
+        return w
+    pose = np.asarray(track.pose, dtype=np.float64)
+
+    def away(ref: np.ndarray) -> np.ndarray:
+        return np.maximum(
+            np.linalg.norm(pose[:, :2] - ref[:2], axis=1), np.abs(wrap_angle(pose[:, 2] - ref[2]))
+        ) > BREAKAWAY_MOTION
+
+    moved = np.flatnonzero(away(pose[0]))
+    if not len(moved):
+        return np.zeros_like(w)
+    w[: moved[0] + 1] = 0.0
+    moving = np.flatnonzero(away(pose[-1]))
+    if len(moving):
+        w[moving[-1] + 2 :] = 0.0
     return w
 
 
@@ -79,7 +90,7 @@ class ReplayResiduals:
     correlation `pose_correlation` (perception's error drifts from frame to frame), its
     residuals whitened (`whiten_ar1`). `rest_tolerance` (m, rad): keep one pose sample of each
     observed track's final stretch at rest (`rest_weights`); None: every sample counts. A real
-    pusher's breakaway sample carries no force residual (`breakaway_weights`)."""
+    pusher's force samples with the object at rest carry no residual (`resting_force_weights`)."""
 
     def __init__(
         self,
@@ -99,7 +110,7 @@ class ReplayResiduals:
         self.n_data = self.obs.size
         self.pose_correlation = float(pose_correlation)
         self.weights = np.ones(self.obs.shape)  # (N, 5) per-sample weights of the residuals
-        self.weights[:, :2] = np.concatenate([breakaway_weights(t)[1:] for t in tracks])
+        self.weights[:, :2] = np.concatenate([resting_force_weights(t)[1:] for t in tracks])
         if rest_tolerance is not None:
             self.weights[:, 2:] = np.concatenate(
                 [rest_weights(t.pose, *rest_tolerance)[1:] for t in tracks]
