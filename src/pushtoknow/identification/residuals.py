@@ -52,9 +52,13 @@ def resting_force_weights(track: PushTrack) -> np.ndarray:
     pose = np.asarray(track.pose, dtype=np.float64)
 
     def away(ref: np.ndarray) -> np.ndarray:
-        return np.maximum(
-            np.linalg.norm(pose[:, :2] - ref[:2], axis=1), np.abs(wrap_angle(pose[:, 2] - ref[2]))
-        ) > BREAKAWAY_MOTION
+        return (
+            np.maximum(
+                np.linalg.norm(pose[:, :2] - ref[:2], axis=1),
+                np.abs(wrap_angle(pose[:, 2] - ref[2])),
+            )
+            > BREAKAWAY_MOTION
+        )
 
     moved = np.flatnonzero(away(pose[0]))
     if not len(moved):
