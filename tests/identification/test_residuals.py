@@ -1,7 +1,10 @@
 """Residual weighting of `identification.residuals`: a resting object's repeated pose counts
 once; AR(1) pose errors are whitened exactly."""
 
+from pathlib import Path
+
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -91,3 +94,30 @@ def test_a_real_pusher_holding_the_object_at_rest_carries_no_force_residual():
     np.testing.assert_array_equal(resting_force_weights(simulated), 1.0)
     still = PushTrack(push, np.zeros(2), np.zeros(3), force, np.zeros((8, 3)), pad)
     np.testing.assert_array_equal(resting_force_weights(still), 0.0)
+
+
+def test_the_real_hex_pressed_before_it_moves_carries_no_force_residual():
+    """The MIT Push hex's first push on ABS: the probe presses on it with about 4 N while
+    nothing moves (docs/DESIGN.md §11). Those samples, and only samples with the object at
+    rest, weigh 0; the sliding ones in between all count."""
+    from pushtoknow.evaluation.real_benchmark import find_real_objects
+    from pushtoknow.identification import fit
+    from pushtoknow.identification.residuals import BREAKAWAY_MOTION, resting_force_weights
+
+    folder = Path(__file__).resolve().parents[2] / ".." / "shared" / "datasets"
+    folder = folder / "mit-push-abs" / "hex"
+    if not folder.is_dir():
+        pytest.skip(f"{folder} not found (real-data test)")
+    (obj,), _ = find_real_objects(folder)
+    i = next(k for k, f in enumerate(obj.files) if "s=0.500_t=-1.396" in str(f))
+    (track,) = fit.tracks_from_records([obj.records[i]], obj.sim_config)
+    w = resting_force_weights(track)[:, 0]
+    pose = np.asarray(track.pose)
+    still = np.max(np.abs(pose - pose[0]), axis=1) <= BREAKAWAY_MOTION
+    pressed = still & (np.linalg.norm(track.force, axis=1) > 3.0)
+    assert pressed[1:].sum() >= 1  # a sample after the first, pressed and still
+    assert np.all(w[pressed] == 0.0)
+    settled = np.max(np.abs(pose - pose[-1]), axis=1) <= BREAKAWAY_MOTION
+    sliding = np.flatnonzero(~still & ~settled)[1:]  # after the breakaway, before the stop
+    assert len(sliding) >= 2
+    assert np.all(w[sliding] == 1.0)
