@@ -129,10 +129,9 @@ def _print(report) -> None:
         console.print(t)
     header, rows = report.mass_rows()
     if rows:
-        pm = report.probe_mass or {}
-        probe = "unknown" if pm.get("mass") is None else f"{pm['mass']:.3f} ± {pm['std']:.2g} kg"
         t = Table(
-            title=f"m from force and acceleration (probe's own mass {probe}; not fused)",
+            title=f"m from force and acceleration (probe's own mass {report.probe_text()}; "
+            "not fused)",
             title_justify="left",
         )
         for h in header:

@@ -685,6 +685,16 @@ class RealBenchmark:
             rows.append([key, cell, "–" if truth is None else f"{truth:.4g}", band, pushes])
         return header, rows
 
+    def probe_text(self) -> str:
+        """The probe's own mass as weighed (`force_balance.probe_mass`), in words."""
+        pm = self.probe_mass
+        if pm is None or pm["mass"] is None:
+            return "unknown (no free probe motion)"
+        return (
+            f"{pm['mass']:.3f} ± {pm['std']:.2g} kg from {pm['samples']} free samples of "
+            f"{len(pm['pushes'])} pushes"
+        )
+
     def table(self) -> str:
         """The report as markdown: the per-object table, the per-surface μ table and the mass
         read off force and acceleration."""
@@ -702,18 +712,11 @@ class RealBenchmark:
             "Cells: estimate ± std (|z|); * the truth lies outside the 90% interval. μ truth: "
             "measured on the pure translations; μ·m: relative error against measured μ × mass."
         )
-        pm = self.probe_mass
-        if pm is not None and mass[1]:
-            probe = (
-                "unknown (no free probe motion)"
-                if pm["mass"] is None
-                else f"{pm['mass']:.3f} ± {pm['std']:.2g} kg from {pm['samples']} free samples of "
-                f"{len(pm['pushes'])} pushes"
-            )
+        if self.probe_mass is not None and mass[1]:
             out.append(
                 "m from force and acceleration (`identification.force_balance`): Re H of force "
                 "over acceleration in the coherent band, less the probe's mass, "
-                f"{probe}; not fused into any estimator."
+                f"{self.probe_text()}; not fused into any estimator."
             )
         return "\n".join(out) + "\n"
 

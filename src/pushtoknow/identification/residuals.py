@@ -40,7 +40,7 @@ def resting_force_weights(track: PushTrack) -> np.ndarray:
     pad (a real pusher) holds the object at rest, 1 elsewhere. At rest are the samples up to
     and including the one in which the object starts to move (its pose first leaves the start
     by more than `BREAKAWAY_MOTION` m or rad; all of them if it never does) and those after
-    the one in which it comes to its final rest (within `BREAKAWAY_MOTION` of its last pose).
+    the one in which it comes to its final rest (`rest_weights` within `BREAKAWAY_MOTION`).
     A resting object's force is static friction's, anything up to μ_s·m·g: a probe left
     pressed on it before or after the push (up to 4.4 N on the MIT recordings), and the
     breakaway above the sliding force with the probe's own inertia (docs/DESIGN.md §11). The
@@ -50,24 +50,14 @@ def resting_force_weights(track: PushTrack) -> np.ndarray:
     if track.pad is None:
         return w
     pose = np.asarray(track.pose, dtype=np.float64)
-
-    def away(ref: np.ndarray) -> np.ndarray:
-        return (
-            np.maximum(
-                np.linalg.norm(pose[:, :2] - ref[:2], axis=1),
-                np.abs(wrap_angle(pose[:, 2] - ref[2])),
-            )
-            > BREAKAWAY_MOTION
-        )
-
-    moved = np.flatnonzero(away(pose[0]))
+    moved = np.flatnonzero(
+        (np.linalg.norm(pose[:, :2] - pose[0, :2], axis=1) > BREAKAWAY_MOTION)
+        | (np.abs(wrap_angle(pose[:, 2] - pose[0, 2])) > BREAKAWAY_MOTION)
+    )
     if not len(moved):
         return np.zeros_like(w)
     w[: moved[0] + 1] = 0.0
-    moving = np.flatnonzero(away(pose[-1]))
-    if len(moving):
-        w[moving[-1] + 2 :] = 0.0
-    return w
+    return w * rest_weights(pose, BREAKAWAY_MOTION, BREAKAWAY_MOTION)[:, None]
 
 
 def whiten_ar1(e: np.ndarray, rho: float, lengths: Sequence[int]) -> np.ndarray:
