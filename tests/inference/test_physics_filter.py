@@ -229,3 +229,24 @@ def test_the_physics_filter_gives_the_recorded_beliefs():
     from helpers import assert_recorded_run
 
     assert_recorded_run("physics", "physics_filter_catalogue117_seed0.json", rtol=1e-5, atol=1e-8)
+
+
+def test_later_start_poses_are_registered_to_the_first_outline_where_visnet_is_lost(model):
+    """random:101:9, a 4 cm quadrilateral VisNet loses (its start poses 10–20 mm and 10–160°
+    off): each later push starts from the first view's contour registered to the push's mask,
+    within 1 mm and 2.5° of the true pose. Perception only: no update is fitted."""
+    from pushtoknow.common.angles import wrap_angle
+
+    class PerceptionOnly(PhysicsFilterEstimator):
+        def update(self, record, view, pose0):
+            starts.append((np.asarray(pose0), np.asarray(record.pose[0])))
+            return self.perceive(record, view, pose0)
+
+    starts: list = []
+    cfg = InferenceConfig(pushes=3, estimator="physics", candidates=4)
+    est = PerceptionOnly(model, cfg)
+    infer_simulated(model, load_object_spec("random:101:9"), cfg, seed=0, estimator=est)
+    assert len(starts) == 3
+    for seen, true in starts[1:]:
+        assert np.hypot(*(seen[:2] - true[:2])) < 1e-3
+        assert abs(wrap_angle(seen[2] - true[2])) < np.radians(2.5)

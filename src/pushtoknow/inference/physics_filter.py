@@ -3,8 +3,10 @@
 
 Perception is the learned filter's (the paper's dual structure), except for the outline: the
 footprint is traced on the first push's mask with its corners kept sharp
-(`perception.footprint.replay_outline`) and fixes the object frame; each push's
-pose track is VisNet's, frame by frame, each frame's reference pose the previous measurement.
+(`perception.footprint.replay_outline`) and fixes the object frame; a later push's start
+pose is VisNet's refined geometrically, the first push's contour registered to the push's
+mask (`perception.registration.register`); each push's pose track is VisNet's from there,
+frame by frame, each frame's reference pose the previous measurement.
 The parameter belief (a Gaussian over `identification.prior.fit_transform`'s coordinates,
 starting at the prior of the footprint seen, `identification.prior.footprint_prior`) is
 updated after each push by replaying it in the testbed's scene with that footprint
@@ -57,6 +59,7 @@ from pushtoknow.inference.estimator import (
 )
 from pushtoknow.models.checkpoint import TrainedModel
 from pushtoknow.perception.footprint import object_top, replay_outline
+from pushtoknow.perception.registration import outline_points, register, traced_contour
 from pushtoknow.perception.visnet import start_pose, visnet_poses
 from pushtoknow.testbed.executor import View
 from pushtoknow.testbed.objects import COM_MARGIN, MIN_HEIGHT, MIN_WIDTH, narrowest_side
@@ -140,6 +143,7 @@ class PhysicsFilterEstimator(Estimator):
         self._pool: RolloutPool | None = None
         self._prev: tuple[np.ndarray, np.ndarray] | None = None  # (S_0, pose0) of last push
         self._last_pose: np.ndarray | None = None
+        self._outline: np.ndarray | None = None  # (N, 2) first view's contour, object frame
         cfg = self.filter_config
         tactile = self.sim_config.tactile.force_noise_std
         force = cfg.force_noise or (tactile if tactile > 0 else UNKNOWN_FORCE_NOISE)
@@ -232,9 +236,19 @@ class PhysicsFilterEstimator(Estimator):
         return verts, float(self.scene.height)
 
     def start_pose(self, view: View, initial_pose: np.ndarray | None) -> np.ndarray:
-        """pose0 of the next push (`perception.visnet.start_pose`)."""
+        """pose0 of the next push: VisNet's (`perception.visnet.start_pose`), refined by
+        registering the first view's contour to this view's mask
+        (`perception.registration.register`)."""
         previous = None if self._prev is None else (*self._prev, self._last_pose)
-        return start_pose(self.model.visnet, self.camera, view, initial_pose, previous)
+        guess = start_pose(self.model.visnet, self.camera, view, initial_pose, previous)
+        if self._outline is None:
+            return guess
+        return register(self._outline, self._contour(view), guess).pose
+
+    def _contour(self, view: View):
+        """The object's contour in a view, traced as the replayed outline is."""
+        mask = view.s0 if view.outline_mask is None else view.outline_mask
+        return traced_contour(mask, view.depth, view.s0, self.camera)
 
     @torch.no_grad()
     def pose_track(self, record: PushRecord, view: View, pose0: np.ndarray) -> np.ndarray:
@@ -256,6 +270,8 @@ class PhysicsFilterEstimator(Estimator):
             poses = np.asarray(record.pose, dtype=np.float64)
         if view is not None:
             self._prev = (view.s0, pose0)
+            if self._outline is None:
+                self._outline = outline_points(self._contour(view), pose0)
         self._last_pose = poses[-1]
         return poses
 
