@@ -1,12 +1,14 @@
-"""The object's pose before a push, found geometrically (docs/DESIGN.md §12): the outline
-traced before the first push, registered rigidly to the mask seen before a later one.
+"""The object's pose before a push, found geometrically (docs/DESIGN.md §12): the contour
+traced before the first push, registered rigidly to the contour of the mask seen before a
+later one.
 
 Both contours are traced the same way (`perception.footprint.REPLAY_SMOOTHING` on the mask's
 own resolution, on the plane of the object's top), so smoothing rounds their corners alike
-and the registration is unbiased by it. The registration is point-to-line ICP (Gauss–Newton
-on each outline point's distance along the contour's normal, Huber-weighted), regularised
-towards an initial guess (the learned pose sensor's) with `GUESS_STD`: along directions the
-outline does not fix (a disc's rotation) the guess stays.
+and the registration is unbiased by it. The fit is point-to-line ICP (Gauss–Newton on each
+outline point's distance along its normal, Huber-weighted) fused with a guess, the learned pose
+sensor's (`GUESS_STD`). Where the guess is wrong (its fit is worse than the best of fits from
+`STARTS` rotations), the outline decides, among a symmetric outline's copies the one nearest
+the guess; an outline that does not fix its rotation (a disc) keeps the guess's.
 """
 
 from __future__ import annotations
@@ -19,7 +21,7 @@ from scipy.spatial import cKDTree
 
 from pushtoknow.common.angles import wrap_angle
 from pushtoknow.common.camera import CameraModel
-from pushtoknow.geometry.affordances import mask_contour
+from pushtoknow.geometry.affordances import Contour, mask_contour
 from pushtoknow.perception.footprint import REPLAY_SMOOTHING, object_top, resample
 
 POINT_SPACING = 5e-4  # m: the contours are resampled to a point per this arc length
@@ -43,13 +45,15 @@ STEP_TOLERANCE = 1e-7  # m (and rad·m): the iteration stops when the step is be
 @dataclass(frozen=True)
 class Registration:
     """pose: (3,) (x, y, θ) placing the outline on the mask; rms: the outline points' RMS
-    distance (m) from the mask's contour there."""
+    distance (m) from the nearest of the mask's contour points (every `POINT_SPACING`)."""
 
     pose: np.ndarray
     rms: float
 
 
-def traced_contour(mask: np.ndarray, depth: np.ndarray, s0: np.ndarray, camera: CameraModel):
+def traced_contour(
+    mask: np.ndarray, depth: np.ndarray, s0: np.ndarray, camera: CameraModel
+) -> Contour:
     """The contour (`geometry.affordances.Contour`, world m) of a mask (H, W) or (kH, kW)
     traced as the replayed outline is, on the plane of the object's top in depth (H, W) m
     (S_0 (H, W) says where the object is)."""
@@ -57,7 +61,7 @@ def traced_contour(mask: np.ndarray, depth: np.ndarray, s0: np.ndarray, camera: 
     return mask_contour(mask, camera, z, smoothing=REPLAY_SMOOTHING)
 
 
-def outline_points(contour, pose0: np.ndarray) -> np.ndarray:
+def outline_points(contour: Contour, pose0: np.ndarray) -> np.ndarray:
     """A traced contour's points resampled every `POINT_SPACING`, in the object frame of the
     pose (3,) (x, y, θ) it was traced at: (N, 2) m."""
     pts = np.asarray(contour.points, dtype=np.float64)
@@ -66,7 +70,7 @@ def outline_points(contour, pose0: np.ndarray) -> np.ndarray:
     return (pts - np.asarray(pose0[:2])) @ np.array([[c, -s], [s, c]])
 
 
-def register(points: np.ndarray, contour, guess: np.ndarray) -> Registration:
+def register(points: np.ndarray, contour: Contour, guess: np.ndarray) -> Registration:
     """The pose (3,) placing object-frame points (N, 2) on a traced contour (world) (module
     doc). ICP from `guess` (3,), fused with it (`GUESS_STD`), where that fits the outline as
     well as the best of ICP runs from `STARTS` rotations of the guess (`TIE`); else, the guess
@@ -124,9 +128,8 @@ def _fit(
     """Point-to-line ICP (Gauss–Newton, Levenberg-damped, Huber-weighted) of points (N, 2)
     with their normals (N, 2) onto the target contour's points (M, 2) from `start` (3,): the
     outline's own normals, so a rotation it does not fix is not fitted to the target's pixel
-    staircase (fixed in the world, not the object). With `anchor`
-    (3,), the guess fused in with GUESS_STD; without `rotation`, the rotation stays the
-    start's."""
+    staircase (fixed in the world, not the object). With `anchor` (3,), the guess fused in
+    with GUESS_STD; without `rotation`, the rotation stays the start's."""
     pose = start.copy()
     weight = 1.0 / CONTOUR_NOISE**2
     prior = np.zeros(3) if anchor is None else 1.0 / GUESS_STD**2
@@ -134,8 +137,7 @@ def _fit(
         world = _place(points, pose)
         arm = world - pose[:2]  # R(θ) q
         _, idx = tree.query(world)
-        c, s = math.cos(pose[2]), math.sin(pose[2])
-        n = normals @ np.array([[c, s], [-s, c]])
+        n = _place(normals, np.array([0.0, 0.0, pose[2]]))  # R(θ) n
         r = np.einsum("ij,ij->i", n, world - target[idx])
         jac = np.stack([n[:, 0], n[:, 1], n[:, 1] * arm[:, 0] - n[:, 0] * arm[:, 1]], 1)
         w = weight * np.minimum(1.0, HUBER / np.maximum(np.abs(r), 1e-12))
