@@ -5,19 +5,13 @@ import math
 
 import numpy as np
 import pytest
-from matplotlib.path import Path
 from shapely.geometry import Point
 
+from helpers import rasterise_footprint
 from pushtoknow.common.angles import wrap_angle
 from pushtoknow.common.camera import CameraModel
-from pushtoknow.perception.footprint import resample
-from pushtoknow.perception.registration import (
-    _normals,
-    fixes_rotation,
-    outline_points,
-    register,
-    traced_contour,
-)
+from pushtoknow.perception.footprint import replay_contour, resample
+from pushtoknow.perception.registration import _normals, fixes_rotation, outline_points, register
 
 CAMERA = CameraModel(position=(0.0, 0.0, 0.75))
 OUTLINE_SCALE = 4  # the testbed's outline masks: 4 × the camera's resolution
@@ -28,27 +22,21 @@ SQUARE = np.array([[-0.04, -0.04], [0.04, -0.04], [0.04, 0.04], [-0.04, 0.04]])
 DISC = np.asarray(Point(0, 0).buffer(0.05, quad_segs=64).exterior.coords)[:-1]
 
 
-def view_of(outline: np.ndarray, pose) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(outline mask (kH, kW), depth (H, W), S_0 (H, W)) of an object-frame outline (V, 2) at
-    pose (x, y, θ), its top HEIGHT above the table, seen from CAMERA."""
-    c, s = math.cos(pose[2]), math.sin(pose[2])
-    world = outline @ np.array([[c, s], [-s, c]]) + np.asarray(pose[:2])
-    fine = CAMERA.scaled(OUTLINE_SCALE)
-    u, v = np.meshgrid(np.arange(fine.width), np.arange(fine.height))
-    xy = fine.pixel_to_world(np.stack([u, v], -1).reshape(-1, 2).astype(float), HEIGHT)
-    mask = Path(world).contains_points(xy).reshape(fine.height, fine.width)
-    s0 = mask.reshape(CAMERA.height, OUTLINE_SCALE, CAMERA.width, OUTLINE_SCALE).any(axis=(1, 3))
+def contour_of(outline: np.ndarray, pose):
+    """The replay contour of an object-frame outline (V, 2) at pose (x, y, θ), its top HEIGHT
+    above the table, seen from CAMERA at the outline resolution."""
+    fine = rasterise_footprint(outline, pose, CAMERA.scaled(OUTLINE_SCALE), HEIGHT)
+    s0 = fine.reshape(CAMERA.height, OUTLINE_SCALE, CAMERA.width, OUTLINE_SCALE).any(axis=(1, 3))
     depth = np.where(s0, CAMERA.position[2] - HEIGHT, CAMERA.position[2])
-    return mask, depth, s0
+    return replay_contour(s0, depth, fine, CAMERA)
 
 
 def template(outline: np.ndarray, pose0) -> np.ndarray:
-    return outline_points(traced_contour(*view_of(outline, pose0), CAMERA), np.asarray(pose0))
+    return outline_points(contour_of(outline, pose0), np.asarray(pose0))
 
 
 def registered(outline, pose0, pose, guess):
-    contour = traced_contour(*view_of(outline, pose), CAMERA)
-    return register(template(outline, pose0), contour, np.asarray(guess, dtype=float))
+    return register(template(outline, pose0), contour_of(outline, pose), np.asarray(guess, float))
 
 
 def angle_error(a: float, b: float, period: float = 2 * math.pi) -> float:

@@ -58,8 +58,8 @@ from pushtoknow.inference.estimator import (
     belief_to_estimate,
 )
 from pushtoknow.models.checkpoint import TrainedModel
-from pushtoknow.perception.footprint import object_top, replay_outline
-from pushtoknow.perception.registration import outline_points, register, traced_contour
+from pushtoknow.perception.footprint import object_top, replay_contour, replay_outline
+from pushtoknow.perception.registration import outline_points, register
 from pushtoknow.perception.visnet import start_pose, visnet_poses
 from pushtoknow.testbed.executor import View
 from pushtoknow.testbed.objects import COM_MARGIN, MIN_HEIGHT, MIN_WIDTH, narrowest_side
@@ -243,12 +243,8 @@ class PhysicsFilterEstimator(Estimator):
         guess = start_pose(self.model.visnet, self.camera, view, initial_pose, previous)
         if self._outline is None:
             return guess
-        return register(self._outline, self._contour(view), guess).pose
-
-    def _contour(self, view: View):
-        """The object's contour in a view, traced as the replayed outline is."""
-        mask = view.s0 if view.outline_mask is None else view.outline_mask
-        return traced_contour(mask, view.depth, view.s0, self.camera)
+        contour = replay_contour(view.s0, view.depth, view.outline_mask, self.camera)
+        return register(self._outline, contour, guess).pose
 
     @torch.no_grad()
     def pose_track(self, record: PushRecord, view: View, pose0: np.ndarray) -> np.ndarray:
@@ -271,7 +267,8 @@ class PhysicsFilterEstimator(Estimator):
         if view is not None:
             self._prev = (view.s0, pose0)
             if self._outline is None:
-                self._outline = outline_points(self._contour(view), pose0)
+                contour = replay_contour(view.s0, view.depth, view.outline_mask, self.camera)
+                self._outline = outline_points(contour, pose0)
         self._last_pose = poses[-1]
         return poses
 

@@ -7,7 +7,7 @@ import math
 import numpy as np
 
 from pushtoknow.common.camera import CameraModel
-from pushtoknow.geometry.affordances import mask_contour
+from pushtoknow.geometry.affordances import Contour, mask_contour
 
 FOOTPRINT_VERTICES = 32  # vertices of every footprint polygon (batchable)
 # Gaussian σ (m on the traced plane) the mask is smoothed by before its outline is traced. A
@@ -212,9 +212,17 @@ def replay_outline(
     pose0,
 ) -> np.ndarray:
     """The footprint (V, 2) a simulator replays the pushes with, in the object frame of pose0
-    (x, y, θ): traced on the outline-resolution mask (else S_0) with `REPLAY_SMOOTHING`, on the
-    plane of the object's top, corners sharpened (`sharpen_corners`), about the traced
-    contour's centroid."""
-    mask = s0 if outline_mask is None else outline_mask
-    c = mask_contour(mask, camera, object_top(depth, s0, camera), smoothing=REPLAY_SMOOTHING)
+    (x, y, θ): the `replay_contour`, corners sharpened (`sharpen_corners`), about its
+    centroid."""
+    c = replay_contour(s0, depth, outline_mask, camera)
     return to_object_frame(sharpen_corners(c.points), c.centroid, pose0)
+
+
+def replay_contour(
+    s0: np.ndarray, depth: np.ndarray, outline_mask: np.ndarray | None, camera: CameraModel
+) -> Contour:
+    """The object's contour (world, m) seen before a push, as the replayed outline is traced:
+    on the outline-resolution mask (else S_0 (H, W)) with `REPLAY_SMOOTHING`, on the plane of
+    the object's top found in the depth (H, W) m."""
+    mask = s0 if outline_mask is None else outline_mask
+    return mask_contour(mask, camera, object_top(depth, s0, camera), smoothing=REPLAY_SMOOTHING)

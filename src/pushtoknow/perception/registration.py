@@ -2,13 +2,13 @@
 traced before the first push, registered rigidly to the contour of the mask seen before a
 later one.
 
-Both contours are traced the same way (`perception.footprint.REPLAY_SMOOTHING` on the mask's
-own resolution, on the plane of the object's top), so smoothing rounds their corners alike
-and the registration is unbiased by it. The fit is point-to-line ICP (Gauss–Newton on each
-outline point's distance along its normal, Huber-weighted) fused with a guess, the learned pose
-sensor's (`GUESS_STD`). Where the guess is wrong (its fit is worse than the best of fits from
-`STARTS` rotations), the outline decides, among a symmetric outline's copies the one nearest
-the guess; an outline that does not fix its rotation (a disc) keeps the guess's.
+Both contours are traced the same way (`perception.footprint.replay_contour`), so smoothing
+rounds their corners alike and the registration is unbiased by it. The fit is point-to-line
+ICP (Gauss–Newton on each outline point's distance along its normal, Huber-weighted) fused
+with a guess, the learned pose sensor's (`GUESS_STD`). Where the guess is wrong (its fit is
+worse than the best of fits from `STARTS` rotations), the outline decides, among a symmetric
+outline's copies the one nearest the guess; an outline that does not fix its rotation (a disc)
+keeps the guess's.
 """
 
 from __future__ import annotations
@@ -20,9 +20,8 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from pushtoknow.common.angles import wrap_angle
-from pushtoknow.common.camera import CameraModel
-from pushtoknow.geometry.affordances import Contour, mask_contour
-from pushtoknow.perception.footprint import REPLAY_SMOOTHING, object_top, resample
+from pushtoknow.geometry.affordances import Contour
+from pushtoknow.perception.footprint import resample, to_object_frame
 
 POINT_SPACING = 5e-4  # m: the contours are resampled to a point per this arc length
 CONTOUR_NOISE = 1e-3  # m: a traced contour point's error (the residuals' scale)
@@ -51,23 +50,10 @@ class Registration:
     rms: float
 
 
-def traced_contour(
-    mask: np.ndarray, depth: np.ndarray, s0: np.ndarray, camera: CameraModel
-) -> Contour:
-    """The contour (`geometry.affordances.Contour`, world m) of a mask (H, W) or (kH, kW)
-    traced as the replayed outline is, on the plane of the object's top in depth (H, W) m
-    (S_0 (H, W) says where the object is)."""
-    z = object_top(depth, s0, camera)
-    return mask_contour(mask, camera, z, smoothing=REPLAY_SMOOTHING)
-
-
 def outline_points(contour: Contour, pose0: np.ndarray) -> np.ndarray:
-    """A traced contour's points resampled every `POINT_SPACING`, in the object frame of the
-    pose (3,) (x, y, θ) it was traced at: (N, 2) m."""
-    pts = np.asarray(contour.points, dtype=np.float64)
-    pts = resample(pts, max(len(pts), int(_perimeter(pts) / POINT_SPACING)))
-    c, s = math.cos(pose0[2]), math.sin(pose0[2])
-    return (pts - np.asarray(pose0[:2])) @ np.array([[c, -s], [s, c]])
+    """A traced contour's points (`_dense`) in the object frame of the pose (3,) (x, y, θ) it
+    was traced at: (N, 2) m."""
+    return to_object_frame(_dense(contour.points), np.asarray(pose0[:2]), pose0)
 
 
 def register(points: np.ndarray, contour: Contour, guess: np.ndarray) -> Registration:
@@ -75,8 +61,7 @@ def register(points: np.ndarray, contour: Contour, guess: np.ndarray) -> Registr
     doc). ICP from `guess` (3,), fused with it (`GUESS_STD`), where that fits the outline as
     well as the best of ICP runs from `STARTS` rotations of the guess (`TIE`); else, the guess
     being wrong, the best fit nearest it in rotation (of a symmetric outline's copies)."""
-    target = np.asarray(contour.points, dtype=np.float64)
-    target = resample(target, max(len(target), int(_perimeter(target) / POINT_SPACING)))
+    target = _dense(contour.points)
     normals = _normals(points)
     tree = cKDTree(target)
     guess = np.asarray(guess, dtype=np.float64)
@@ -94,8 +79,11 @@ def register(points: np.ndarray, contour: Contour, guess: np.ndarray) -> Registr
     return min(alike, key=lambda f: abs(wrap_angle(f.pose[2] - guess[2])))
 
 
-def _perimeter(points: np.ndarray) -> float:
-    return float(np.linalg.norm(np.diff(np.vstack([points, points[:1]]), axis=0), axis=1).sum())
+def _dense(points: np.ndarray) -> np.ndarray:
+    """A closed contour's points (N, 2) resampled to one every `POINT_SPACING` (at least N)."""
+    pts = np.asarray(points, dtype=np.float64)
+    perimeter = float(np.linalg.norm(pts - np.roll(pts, 1, axis=0), axis=1).sum())
+    return resample(pts, max(len(pts), int(perimeter / POINT_SPACING)))
 
 
 def fixes_rotation(points: np.ndarray, normals: np.ndarray) -> bool:
