@@ -314,3 +314,93 @@ def test_every_reported_mean_lies_in_its_interval_and_the_com_in_its_region(fp, 
     np.testing.assert_array_equal(est.upper[others], free.upper[others])
     z = normalise_params(est.mean)
     assert np.all(np.isfinite(z))
+
+
+# ---- I_z ≤ m·r² ---------------------------------------------------------------------------------
+
+MI = [PARAM_NAMES.index("mass"), PARAM_NAMES.index("inertia")]
+SQUARE = np.array([[-0.05, -0.05], [0.05, -0.05], [0.05, 0.05], [-0.05, 0.05]])
+
+
+def _mass_inertia_belief(mass, inertia, log_sd=(0.3, 0.3), rho=0.0):
+    """A belief with m and I_z log-normal about (mass, inertia) SI, log stds log_sd and log
+    correlation rho; μ 0.5, the CoM at the origin with 2 mm std."""
+    phi = np.array([mass, 0.5, 0.0, 0.0, inertia])
+    mean = normalise_params(phi)
+    sd = np.array([log_sd[0], 0.1, 0.002, 0.002, log_sd[1]]) / space_scale()
+    corr = np.eye(5)
+    corr[MI[0], MI[1]] = corr[MI[1], MI[0]] = rho
+    return mean, corr * np.outer(sd, sd)
+
+
+def test_an_inertia_above_what_the_outline_allows_is_truncated_to_a_possible_one():
+    """m 0.3 kg with I_z 3 g·m² on a 10 cm square: m·r² at the centre is 1.5 g·m², so the
+    Gaussian belief's own mean is impossible. Truncated to I_z ≤ m·r², the reported mean obeys
+    it (E[I_z] ≤ r² E[m] pointwise), m rises and I_z falls, and the evaluation's count of
+    impossible estimates goes from 1 to 0."""
+    from pushtoknow.evaluation.metrics import impossible_estimates
+    from pushtoknow.testbed.shapes import Footprint
+
+    belief = _mass_inertia_belief(0.3, 3e-3)
+    region = com_region(SQUARE, COM_MARGIN)
+    free = estimate_from_belief(*belief, region)
+    est = estimate_from_belief(*belief, region, outline=SQUARE)
+    reach2 = float(np.max(np.sum((SQUARE - est.mean[COM]) ** 2, axis=1)))
+    assert free.mean[4] > free.mean[0] * reach2  # the untruncated mean is impossible
+    assert est.mean[4] <= est.mean[0] * reach2
+    assert est.mean[0] > free.mean[0] and est.mean[4] < free.mean[4]
+    _check(est, region)
+    fp = [Footprint(SQUARE)]
+    assert impossible_estimates(free.mean[None, None], fp) == 1
+    assert impossible_estimates(est.mean[None, None], fp) == 0
+    # μ and the CoM are untouched
+    np.testing.assert_array_equal(est.mean[1:4], free.mean[1:4])
+
+
+def test_the_truncated_mass_and_inertia_match_monte_carlo():
+    """Moments, quantiles and z-scores of exp of (log m, log I_z) ~ N restricted to
+    log I_z ≤ log m + log r², against 4·10⁶ samples, on a correlated belief straddling the line."""
+    belief = _mass_inertia_belief(0.4, 1.6e-3, log_sd=(0.35, 0.25), rho=0.4)
+    est = estimate_from_belief(*belief, outline=SQUARE)
+    assert est.inertia is not None and 0.2 < est.inertia.mass < 0.9
+    scale = space_scale()[MI]
+    u_mean = np.log(np.array([0.4, 1.6e-3]))
+    u_cov = scale[:, None] * belief[1][np.ix_(MI, MI)] * scale[None, :]
+    rng = np.random.default_rng(1)
+    u = rng.multivariate_normal(u_mean, u_cov, 4_000_000)
+    u = u[u[:, 1] <= u[:, 0] + np.log(0.05**2 * 2)]  # reach of the square from its centre
+    assert est.inertia.mass == pytest.approx(len(u) / 4_000_000, abs=1e-3)
+    x = np.exp(u)
+    se = x.std(0) / math.sqrt(len(x))
+    assert np.all(np.abs(est.mean[MI] - x.mean(0)) < 5 * se)
+    np.testing.assert_allclose(est.std[MI], x.std(0), rtol=3e-3)
+    np.testing.assert_allclose(est.lower[MI], np.quantile(x, 0.05, axis=0), rtol=2e-3)
+    np.testing.assert_allclose(est.upper[MI], np.quantile(x, 0.95, axis=0), rtol=2e-3)
+    for bound, sign in ((est.lower, -1), (est.upper, 1)):
+        np.testing.assert_allclose(est.zscore(bound)[MI], sign * K90, atol=1e-3)
+
+
+def test_a_belief_well_inside_the_bound_is_reported_unchanged():
+    belief = _mass_inertia_belief(1.0, 0.8e-3, log_sd=(0.2, 0.2))
+    region = com_region(SQUARE, COM_MARGIN)
+    est = estimate_from_belief(*belief, region, outline=SQUARE)
+    free = estimate_from_belief(*belief, region)
+    assert est.inertia is None
+    for name in ("mean", "std", "lower", "upper"):
+        np.testing.assert_array_equal(getattr(est, name), getattr(free, name))
+
+
+@settings(max_examples=150, deadline=None)
+@given(_footprints(), _beliefs(), st.floats(0.0, 0.006))
+def test_every_estimate_with_an_outline_is_a_possible_body(fp, belief, margin):
+    """m, μ, I_z positive, the CoM in the hull, I_z ≤ m·max‖p − c‖² at the reported CoM, and
+    every mean inside its own interval."""
+    from pushtoknow.evaluation.metrics import impossible_estimates
+    from pushtoknow.testbed.shapes import Footprint
+
+    region = com_region(fp, margin)
+    est = estimate_from_belief(*belief, region, outline=fp)
+    _check(est, region)
+    if est.inertia is not None and est.inertia.projected:
+        return  # the belief holds no possible body: reported at the nearest one, its median
+    assert impossible_estimates(est.mean[None, None], [Footprint(fp)]) == 0

@@ -284,7 +284,29 @@ def test_the_cache_key_names_the_estimator(tmp_path):
         _cache_key(*args, "physics", pushes + 1),
     }
     assert len(keys) == 4
-    assert _cache_key(*args, "vt-addf") == _cache_key(*args)  # the learned runs' keys as before
+    assert _cache_key(*args, "vt-addf") == _cache_key(*args)
+
+
+@pytest.mark.parametrize("estimator", ["vt-addf", "physics"])
+def test_the_cache_key_follows_the_code_that_reports_the_estimates(
+    tmp_path, monkeypatch, estimator
+):
+    """A changed `common.estimate` (belief → reported numbers) must not reuse old runs, for
+    either estimator; a changed registration must not reuse the physics estimator's."""
+    from pushtoknow.common import estimate
+    from pushtoknow.evaluation.suite import _cache_key
+    from pushtoknow.perception import registration
+
+    (tmp_path / "model.pt").write_bytes(b"weights")
+    args = (tmp_path, "uniform", ["catalogue:1"], EvaluationConfig(), ("constant",), estimator)
+    before = _cache_key(*args)
+    for module in (estimate, registration):
+        copy = tmp_path / f"{module.__name__}.py"
+        copy.write_bytes(Path(module.__file__).read_bytes() + b"\n# changed\n")
+        with monkeypatch.context() as m:
+            m.setattr(module, "__file__", str(copy))
+            changed = _cache_key(*args) != before
+        assert changed == (module is estimate or estimator == "physics"), module.__name__
 
 
 def test_each_objects_physics_run_is_under_the_prior_the_testbed_draws_it_from(monkeypatch):
@@ -338,7 +360,8 @@ def test_merge_keeps_rows_and_computes_only_missing_ones(physics_eval, tmp_path,
     full_physics = kept["sets"]["heldout"]["methods"].pop("physics:uniform")
     del kept["sets"]["random"]
     kept["sets"]["heldout"]["methods"]["vt-addf:uniform"]["nrmse"]["overall"] = 123.0
-    kept["sets"]["heldout"]["notes"] = {}
+    # a kept row's note stays; a recomputed row's note, of the run before, goes
+    kept["sets"]["heldout"]["notes"] = {"vt-addf:uniform": "kept", "physics:uniform": "stale"}
     keep = tmp_path / "kept.json"
     keep.write_text(json.dumps(kept))
     calls = []
@@ -355,6 +378,9 @@ def test_merge_keeps_rows_and_computes_only_missing_ones(physics_eval, tmp_path,
     for name, row in old_held.items():
         assert held[name] == row, name  # bit-identical
     assert held["vt-addf:uniform"]["nrmse"]["overall"] == 123.0
+    notes = merged.sets["heldout"]["notes"]
+    assert notes["physics:uniform"] != "stale" and "replayed" in notes["physics:uniform"]
+    assert notes["vt-addf:uniform"].startswith("kept row; its run, recomputed")
     assert list(held) == ["vt-addf:uniform", "physics:uniform", "prior-mean", "forest",
                           "forest-visnet"]  # fmt: skip
     same = {k for k in full_physics if held["physics:uniform"][k] == full_physics[k]}

@@ -91,7 +91,8 @@ def test_an_l_shapes_com_is_reported_from_the_belief_within_its_hull():
     """The CoM of an L in its notch (inside the convex hull, off the footprint, 2.3 mm from the
     hull less the margin): mean, std and interval are those of the posterior truncated to the
     hull less `COM_MARGIN` (`common.estimate`), so each mean lies in its interval, the CoM in
-    the hull; the z-scores agree with the intervals; the MAP point stays simulable."""
+    the hull, and I_z's with m's to I_z ≤ m·r² on the footprint; the z-scores agree with the
+    intervals; the MAP point stays simulable."""
     from shapely.geometry import Point, Polygon
 
     from pushtoknow.common.estimate import com_region, estimate_from_belief
@@ -102,7 +103,7 @@ def test_an_l_shapes_com_is_reported_from_the_belief_within_its_hull():
     records = simulate_pushes(spec, ["constant"], seed=0, config=SHORT, centred=True)
     res = identify(records, _scene(spec), CFG, seed=0)
     region = com_region(spec.footprint.vertices, COM_MARGIN)
-    want = estimate_from_belief(res.mean_norm, res.cov_norm, region, LEVEL)
+    want = estimate_from_belief(res.mean_norm, res.cov_norm, region, LEVEL, spec.footprint.vertices)
     for name in ("mean", "std", "lower", "upper"):
         np.testing.assert_array_equal(getattr(res, name), getattr(want, name))
     assert ((res.lower <= res.mean) & (res.mean <= res.upper)).all(), (res.lower, res.upper)

@@ -135,8 +135,10 @@ def test_identify_with_the_footprint_from_the_mask(tiny):
     from pushtoknow.testbed.objects import COM_MARGIN
 
     scene = replay_scene(obj, "from-mask")
-    region = com_region(scene.footprint.vertices, COM_MARGIN) + np.array(scene.frame_offset)
-    want = estimate_from_belief(res.mean_norm, res.cov_norm, region, res.level)
+    offset = np.array(scene.frame_offset)
+    region = com_region(scene.footprint.vertices, COM_MARGIN) + offset
+    outline = scene.footprint.vertices + offset  # bounds I_z ≤ m·r²
+    want = estimate_from_belief(res.mean_norm, res.cov_norm, region, res.level, outline)
     np.testing.assert_array_equal(res.mean, want.mean)
     np.testing.assert_array_equal(res.upper, want.upper)
     assert ((res.lower <= res.mean) & (res.mean <= res.upper)).all()

@@ -1,5 +1,5 @@
 """The reported estimate of one Gaussian parameter belief: mean, std and interval of ONE
-distribution (docs/DESIGN.md §2).
+distribution per parameter (docs/DESIGN.md §2).
 
 A belief is a Gaussian N(mean_norm, cov_norm) over the normalised parameters
 (`common.params`). What is reported from it, per parameter in `PARAM_NAMES` order, SI:
@@ -27,6 +27,17 @@ A belief is a Gaussian N(mean_norm, cov_norm) over the normalised parameters
   (property-tested, with the quantiles computed here). And the mean of a distribution over a
   convex region lies in the region.
   Without a region the CoM is the untruncated Gaussian (mean at the interval's centre).
+- **m and I_z**, once an `outline` (the footprint seen) is given: a body of that footprint with
+  its CoM at c has I_z ≤ m·r², r = max‖p − c‖ over the footprint (all its mass at the farthest
+  point), so the Gaussian marginal of (log m, log I_z) is truncated to the half-plane
+  log I_z ≤ log m + log r² at the reported CoM (`inertia_region`), by the same quadrature, and m
+  and I_z reported as exp of its coordinates: mean and std by quadrature, interval and z-score
+  through exp's monotonicity. The bound holds at every point of the truncated belief, so
+  E[I_z] ≤ r²·E[m]: the reported means describe a possible body. Where the half-plane misses
+  less than `NEGLIGIBLE_EXCESS` of the belief (computed in closed form: log I_z − log m is
+  Gaussian), the log-normals are reported unchanged; where it holds less than
+  `MIN_REGION_MASS`, the nearest possible (log m, log I_z) with the Gaussian's width, as for
+  the CoM. That the mean of exp lies in its interval is property-tested, not proven here.
 
 Truncated moments, computed deterministically (same inputs, same output) and without
 sampling: the x-marginal density of N(m, S) restricted to a convex polygon R is
@@ -77,6 +88,9 @@ TINY_REGION = 1e-6  # m: half-width of the region `com_region` returns for too t
 Z_LIMIT = float(-ndtri(1e-15))  # |z-score| of a truth where the truncated belief has no mass
 CONVEX_RTOL = 1e-6  # a region whose hull exceeds its area by more is not convex
 COM = [PARAM_NAMES.index("com_x"), PARAM_NAMES.index("com_y")]
+MASS_INERTIA = [PARAM_NAMES.index("mass"), PARAM_NAMES.index("inertia")]
+# below this share of the belief beyond I_z ≤ m·r², m and I_z are reported untruncated
+NEGLIGIBLE_EXCESS = 1e-9
 _IS_LOG = np.array([k in LOG_PARAMS for k in PARAM_NAMES])
 # about a step of the slice's mass, in its widths: extra quadrature points
 _STEP_OFFSETS = np.array([0.0, *(s * w for w in (0.25, 0.5, 1.0, 2.0, 4.0, 8.0) for s in (-1, 1))])
@@ -150,13 +164,24 @@ def _mass_between(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True)
 class _Marginal:
-    """One coordinate of the truncated distribution: grid (N,), CDF (N,) from 0 to 1."""
+    """One coordinate of the truncated distribution: grid (N,), CDF (N,) from 0 to 1, density
+    (N,) normalised to integrate to 1 over the grid."""
 
     grid: np.ndarray
     cdf: np.ndarray
+    pdf: np.ndarray
     mass: float
     mean: float
     std: float
+
+    def exp_moments(self) -> tuple[float, float]:
+        """Mean and std of exp(x) (the SI moments of a log-space coordinate), by the same
+        trapezoidal rule as the CDF."""
+        shift = float(self.grid[-1])  # exp(x − shift) ≤ 1: no overflow
+        e = np.exp(self.grid - shift)
+        m1 = float(np.trapezoid(e * self.pdf, self.grid))
+        m2 = float(np.trapezoid(e * e * self.pdf, self.grid))
+        return m1 * np.exp(shift), float(np.sqrt(max(m2 - m1 * m1, 0.0))) * np.exp(shift)
 
     def quantile(self, p) -> np.ndarray:
         return np.interp(p, self.cdf, self.grid)
@@ -210,7 +235,7 @@ def _marginal(m: np.ndarray, s: np.ndarray, poly: Polygon, axis: int) -> _Margin
     w = f / mass
     mean = float(np.trapezoid(x * w, x))
     var = float(np.trapezoid((x - mean) ** 2 * w, x))
-    return _Marginal(x, cum / mass, mass, mean, float(np.sqrt(max(var, 0.0))))
+    return _Marginal(x, cum / mass, w, mass, mean, float(np.sqrt(max(var, 0.0))))
 
 
 @dataclass(frozen=True, eq=False)
@@ -245,6 +270,16 @@ class TruncatedGaussian2D:
         if self._marginals is None:
             return self.mean + self.std * float(ndtri(p))
         return np.array([float(g.quantile(p)) for g in self._marginals])
+
+    def exp_moments(self) -> tuple[np.ndarray, np.ndarray]:
+        """Mean and std (2,) of exp of each coordinate: the SI moments where the coordinates are
+        logarithms (log-normal ones for the projected fallback)."""
+        if self._marginals is None:
+            v = self.std**2
+            mean = np.exp(self.mean + 0.5 * v)
+            return mean, mean * np.sqrt(np.expm1(v))
+        pairs = [g.exp_moments() for g in self._marginals]
+        return np.array([p[0] for p in pairs]), np.array([p[1] for p in pairs])
 
     def zscore(self, xy) -> np.ndarray:
         """(2,) Φ⁻¹ of each coordinate's CDF at xy: |z| ≤ Φ⁻¹(½ + level/2) iff that
@@ -293,14 +328,42 @@ def truncate_gaussian_2d(mean, cov, region, level: float = DEFAULT_LEVEL) -> Tru
     )
 
 
+def inertia_region(mean, cov, log_r2: float) -> np.ndarray:
+    """Where (log m, log I_z) can lie for a body whose footprint reaches r from its CoM:
+    I_z ≤ m·r², i.e. log I_z ≤ log m + log_r2 (log_r2 = log r², r in m). The half-plane as a
+    convex polygon (4, 2) large enough to hold every point within `BAND` std of the Gaussian
+    N(mean (2,), cov (2, 2)) that lies in it, for `truncate_gaussian_2d`."""
+    m = np.asarray(mean, dtype=np.float64).reshape(2)
+    excess = float(m[1] - m[0] - log_r2)  # > 0: the mean itself lies beyond the line
+    centre = m - 0.5 * max(excess, 0.0) * np.array([-1.0, 1.0])  # its nearest feasible point
+    sd = float(np.sqrt(max(np.linalg.eigvalsh(np.asarray(cov, dtype=np.float64)).max(), 0.0)))
+    h = 2.0 * BAND * sd + abs(excess) + 1e-3
+    x0, x1, y0, y1 = centre[0] - h, centre[0] + h, centre[1] - h, centre[1] + h
+    box = Polygon([(x0, y0), (x1, y0), (x1, y1), (x0, y1)])
+    # below the line over a wider x-range (the centre lies on or below it, within h)
+    below = Polygon(
+        [
+            (x0 - h, x0 - h + log_r2),
+            (x0 - h, y0 - 3 * h),
+            (x1 + h, y0 - 3 * h),
+            (x1 + h, x1 + h + log_r2),
+        ]
+    )
+    cut = box.intersection(below)
+    return np.asarray(orient(cut, 1.0).exterior.coords[:-1], dtype=np.float64)
+
+
 @dataclass(frozen=True, eq=False)
 class ParameterEstimate:
     """The reported estimate of a Gaussian belief over the normalised parameters.
 
     mean, std, lower, upper (5,): SI, `PARAM_NAMES` order, of one distribution per parameter
     (log-normal m, μ, I_z; the CoM's Gaussian marginal, truncated to `com.region` when `com` is
-    set); lower/upper: its equal-tailed `level` interval, lower ≤ mean ≤ upper. mean_norm (5,),
-    cov_norm (5, 5): the Gaussian belief itself; com: the CoM's truncated belief, or None."""
+    set; (log m, log I_z)'s Gaussian marginal truncated to I_z ≤ m·r² when `inertia` is set);
+    lower/upper: its equal-tailed `level` interval, lower ≤ mean ≤ upper. mean_norm (5,),
+    cov_norm (5, 5): the Gaussian belief itself; com: the CoM's truncated belief, or None;
+    inertia: (log m, log I_z)'s truncated belief, or None; outline (V, 2): the footprint (m,
+    the belief's object frame) that bounds I_z, or None."""
 
     mean: np.ndarray
     std: np.ndarray
@@ -310,6 +373,8 @@ class ParameterEstimate:
     cov_norm: np.ndarray
     level: float = DEFAULT_LEVEL
     com: TruncatedGaussian2D | None = None
+    inertia: TruncatedGaussian2D | None = None
+    outline: np.ndarray | None = None
 
     @property
     def std_norm(self) -> np.ndarray:
@@ -318,11 +383,14 @@ class ParameterEstimate:
     def zscore(self, truth) -> np.ndarray:
         """(5,) standardised error of an SI truth under the reported distribution: the truth
         lies in the `level` interval iff |zscore| ≤ Φ⁻¹(½ + level/2). The Gaussian's z-score in
-        the normalised space, except for a truncated CoM: Φ⁻¹ of its marginal CDF."""
+        the normalised space, except for a truncated CoM, m and I_z: Φ⁻¹ of their marginal
+        CDF."""
         t = np.asarray(truth, dtype=np.float64).reshape(len(PARAM_NAMES))
         z = (normalise_params(t) - self.mean_norm) / np.maximum(self.std_norm, 1e-12)
         if self.com is not None:
             z[COM] = self.com.zscore(t[COM])
+        if self.inertia is not None:
+            z[MASS_INERTIA] = self.inertia.zscore(np.log(t[MASS_INERTIA]))
         return z
 
     def to_json(self) -> dict:
@@ -337,11 +405,13 @@ class ParameterEstimate:
 
 
 def estimate_from_belief(
-    mean_norm, cov_norm, com_region=None, level: float = DEFAULT_LEVEL
+    mean_norm, cov_norm, com_region=None, level: float = DEFAULT_LEVEL, outline=None
 ) -> ParameterEstimate:
     """The reported estimate of the Gaussian belief N(mean_norm (5,), cov_norm (5, 5)) over the
     normalised parameters. com_region: the convex polygon (V, 2) (m, the belief's object frame)
-    the CoM can lie in (see `com_region`), or None for the untruncated Gaussian. ValueError for
+    the CoM can lie in (see `com_region`), or None for the untruncated Gaussian. outline: the
+    footprint (V, 2) (m, same frame) whose reach r from the reported CoM bounds I_z ≤ m·r²
+    (module docstring), or None for untruncated m and I_z. ValueError for
     a malformed belief, a non-convex region or a log-normal wider than 2·Φ⁻¹(½ + level/2) in log
     space (its mean would lie above its interval; module docstring). Deterministic."""
     if not 0.0 < level < 1.0:
@@ -378,4 +448,32 @@ def estimate_from_belief(
             level,
         )
         mean[COM], std[COM], lower[COM], upper[COM] = com.mean, com.std, com.lower, com.upper
-    return ParameterEstimate(mean, std, lower, upper, m, c, level, com)
+    inertia = None
+    if outline is not None:
+        vertices = np.asarray(outline, dtype=np.float64).reshape(-1, 2)
+        reach = float(np.max(np.linalg.norm(vertices - mean[COM][None], axis=1)))
+        if not reach > 0.0:
+            raise ValueError("the outline has no extent about the CoM")
+        log_r2 = 2.0 * np.log(reach)
+        scale = space_scale()[MASS_INERTIA]
+        u = np.log(denormalise_params(m)[MASS_INERTIA])  # (log m, log I_z)
+        cu = scale[:, None] * c[np.ix_(MASS_INERTIA, MASS_INERTIA)] * scale[None, :]
+        gap_sd = float(np.sqrt(max(cu[0, 0] + cu[1, 1] - 2.0 * cu[0, 1], 0.0)))
+        excess = ndtr((u[1] - u[0] - log_r2) / max(gap_sd, 1e-300))
+        if excess > NEGLIGIBLE_EXCESS:
+            inertia = truncate_gaussian_2d(u, cu, inertia_region(u, cu, log_r2), level)
+            mean[MASS_INERTIA], std[MASS_INERTIA] = inertia.exp_moments()
+            lower[MASS_INERTIA] = np.exp(inertia.lower)
+            upper[MASS_INERTIA] = np.exp(inertia.upper)
+    return ParameterEstimate(
+        mean,
+        std,
+        lower,
+        upper,
+        m,
+        c,
+        level,
+        com,
+        inertia,
+        None if outline is None else np.asarray(outline, dtype=np.float64),
+    )

@@ -263,9 +263,10 @@ def _cache_key(
     estimator: str = LEARNED_ESTIMATOR,
     push_actions: np.ndarray | None = None,
 ) -> str:
-    """The key of a cached inference run. The physics estimator's includes its name, the code
-    of the filter (a changed algorithm must not reuse old runs) and the pushes it replayed; the
-    learned filter's is the key it always had, so existing caches stay valid."""
+    """The key of a cached inference run: the checkpoint's bytes, the settings, and the code
+    that turns every estimator's belief into its reported numbers (`common.estimate`: a
+    changed report must not reuse old runs). The physics estimator's adds its name, the code of
+    the filter and of its perception, and the pushes it replayed."""
     h = hashlib.sha256()
     ckpt = Path(model) / "model.pt" if Path(model).is_dir() else Path(model)
     # the checkpoint's bytes, not its path: a retrained model at the same path must not reuse
@@ -273,6 +274,9 @@ def _cache_key(
     h.update(ckpt.read_bytes() if ckpt.is_file() else str(model).encode())
     settings = [policy, cfg.pushes, cfg.seed, cfg.sigma_points, objects, list(profiles)]
     settings.append({"format": CACHE_FORMAT})
+    from pushtoknow.common import estimate
+
+    h.update(Path(estimate.__file__).read_bytes())
     if estimator != LEARNED_ESTIMATOR:
         settings.append({"estimator": estimator})
         if estimator == PHYSICS:
@@ -285,8 +289,10 @@ def _cache_key(
                 residuals,
             )
             from pushtoknow.inference import physics_filter
+            from pushtoknow.perception import footprint, registration
 
-            for module in (physics_filter, recursive, optimise, residuals, replay, fit, prior):
+            filter_code = (physics_filter, recursive, optimise, residuals, replay, fit, prior)
+            for module in (*filter_code, footprint, registration):
                 h.update(Path(module.__file__).read_bytes())
     if push_actions is not None:
         h.update(np.ascontiguousarray(push_actions, dtype=np.float64).tobytes())
@@ -675,7 +681,8 @@ def run_evaluation(
         footprints = [s.footprint for s in specs[set_name]]
         truth = np.stack([s.params.as_array() for s in specs[set_name]])
         ids = [_object_id(o, s) for o, s in zip(objects, specs[set_name])]
-        notes = dict(old_set.get("notes", {}))
+        # a kept row keeps its note; a recomputed row's old note would describe another run
+        notes = {k: v for k, v in old_set.get("notes", {}).items() if k in old}
         need_oracle = cfg.oracle and ORACLE_KEY not in old
         need_forest = forest is not None and not {FOREST, FOREST_VISNET} <= set(old)
         methods: dict[str, MethodRun] = {}

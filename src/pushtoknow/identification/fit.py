@@ -93,7 +93,8 @@ class Identification:
 
     mean, std (5,): posterior moments in PARAM_NAMES order (log-normal for m, μ, I_z; the CoM's
     of the Gaussian truncated to where a CoM can lie, the footprint's convex hull less the
-    testbed's `COM_MARGIN`, `common.estimate`); estimate (5,): the MAP point (its CoM projected
+    testbed's `COM_MARGIN`, and m's and I_z's to I_z ≤ m·r² on the footprint,
+    `common.estimate`); estimate (5,): the MAP point (its CoM projected
     into the hull less `COM_MARGIN` + `COM_INSET`, `replay.feasible`); lower, upper (5,):
     equal-tailed `level` interval of the same distributions (asymmetric for m, μ, I_z), so
     lower ≤ mean ≤ upper; mean_norm (5,), cov_norm (5, 5): the Gaussian posterior over the
@@ -728,7 +729,8 @@ def report(
     # mean, std and interval of one distribution per parameter: the CoM's truncated to where a
     # CoM can lie (the footprint's convex hull less the testbed's margin, record frame)
     region = com_region(footprint.vertices, COM_MARGIN) + np.array([dx, dy])
-    belief = estimate_from_belief(z_map, cov_z, region, LEVEL)
+    outline = footprint.vertices + np.array([dx, dy])
+    belief = estimate_from_belief(z_map, cov_z, region, LEVEL, outline)
     mean, std, lower, upper = belief.mean, belief.std, belief.lower, belief.upper
     q = norm.ppf(0.5 + LEVEL / 2)
     pm, ps = product_moments(z_map, cov_z)

@@ -107,7 +107,7 @@ class PushEstimate:
         b = self.belief
         if level != b.level:
             region = None if b.com is None else b.com.region
-            b = estimate_from_belief(b.mean_norm, b.cov_norm, region, level)
+            b = estimate_from_belief(b.mean_norm, b.cov_norm, region, level, b.outline)
         return b.lower, b.upper
 
     def zscore(self, truth: np.ndarray) -> np.ndarray:
@@ -126,12 +126,16 @@ def belief_to_estimate(
     cov: torch.Tensor | np.ndarray,
     push: Push | None = None,
     com_region: np.ndarray | None = None,
+    outline: np.ndarray | None = None,
 ) -> PushEstimate:
     """Normalised parameter belief (K,), (K, K) → `PushEstimate`; com_region: the convex
-    polygon (V, 2) (m, object frame) the CoM can lie in, None before the footprint is seen."""
+    polygon (V, 2) (m, object frame) the CoM can lie in, outline: the footprint (V, 2) (m,
+    object frame) that bounds I_z ≤ m·r²; both None before the footprint is seen
+    (`common.estimate.estimate_from_belief`)."""
     m = torch.as_tensor(mean).detach().double().numpy()
     c = torch.as_tensor(cov).detach().double().numpy()
-    return PushEstimate(index, estimate_from_belief(m, c, com_region, INTERVAL_LEVEL), push)
+    belief = estimate_from_belief(m, c, com_region, INTERVAL_LEVEL, outline)
+    return PushEstimate(index, belief, push)
 
 
 @dataclass

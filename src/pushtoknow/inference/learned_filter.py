@@ -121,12 +121,13 @@ class LearnedFilterEstimator(Estimator):
         """The parameter belief as an estimate. m, μ and I_z are positive by construction
         (log space); once the first push's view (which defines the object frame) is seen, the
         CoM's belief is truncated to the convex hull of the footprint seen there, less the
-        testbed's margin (`common.estimate`): its mean and interval come from that one
-        distribution."""
-        region = None
+        testbed's margin, and I_z's with m's to I_z ≤ m·r² on that footprint
+        (`common.estimate`): means and intervals come from those distributions."""
+        region = outline = None
         if self._footprint is not None:
-            region = com_region(self._footprint.numpy().astype(np.float64), COM_MARGIN)
-        return belief_to_estimate(index, self.param_mean, self.param_cov, push, region)
+            outline = self._footprint.numpy().astype(np.float64)
+            region = com_region(outline, COM_MARGIN)
+        return belief_to_estimate(index, self.param_mean, self.param_cov, push, region, outline)
 
     def seen_object(self) -> tuple[np.ndarray, float] | None:
         """The footprint seen at the first push (the filter's context) and the object's height

@@ -185,10 +185,12 @@ class PhysicsFilterEstimator(Estimator):
             )
             cov_u[np.diag_indices(5)] += (floors / scale[[0, 0, 2, 3, 4]]) ** 2
         mean, cov = self.belief_norm(cov_u)
-        region = None
+        region = outline = None
         if self.scene is not None:
-            region = self.com_region + np.asarray(self.scene.frame_offset)
-        return belief_to_estimate(index, mean, cov, push, region)
+            offset = np.asarray(self.scene.frame_offset)
+            region = self.com_region + offset
+            outline = self.scene.footprint.vertices + offset
+        return belief_to_estimate(index, mean, cov, push, region, outline)
 
     def _scene(self, view: View | None, pose0: np.ndarray) -> ReplayScene:
         """The replay scene of the footprint seen in the first push's view (it fixes the
