@@ -331,8 +331,9 @@ def truncate_gaussian_2d(mean, cov, region, level: float = DEFAULT_LEVEL) -> Tru
 def inertia_region(mean, cov, log_r2: float) -> np.ndarray:
     """Where (log m, log I_z) can lie for a body whose footprint reaches r from its CoM:
     I_z ≤ m·r², i.e. log I_z ≤ log m + log_r2 (log_r2 = log r², r in m). The half-plane as a
-    convex polygon (V, 2) (a box cut by the line) large enough to hold every point within `BAND` std of the Gaussian
-    N(mean (2,), cov (2, 2)) that lies in it, for `truncate_gaussian_2d`."""
+    convex polygon (V, 2) (a box cut by the line) large enough to hold every point within
+    `BAND` std of the Gaussian N(mean (2,), cov (2, 2)) that lies in it, for
+    `truncate_gaussian_2d`."""
     m = np.asarray(mean, dtype=np.float64).reshape(2)
     excess = float(m[1] - m[0] - log_r2)  # > 0: the mean itself lies beyond the line
     centre = m - 0.5 * max(excess, 0.0) * np.array([-1.0, 1.0])  # its nearest feasible point
