@@ -450,8 +450,8 @@ def estimate_from_belief(
         )
         mean[COM], std[COM], lower[COM], upper[COM] = com.mean, com.std, com.lower, com.upper
     inertia = None
-    if outline is not None:
-        vertices = np.asarray(outline, dtype=np.float64).reshape(-1, 2)
+    vertices = None if outline is None else np.asarray(outline, dtype=np.float64).reshape(-1, 2)
+    if vertices is not None:
         reach = float(np.max(np.linalg.norm(vertices - mean[COM][None], axis=1)))
         if not reach > 0.0:
             raise ValueError("the outline has no extent about the CoM")
@@ -476,5 +476,5 @@ def estimate_from_belief(
         level,
         com,
         inertia,
-        None if outline is None else np.asarray(outline, dtype=np.float64),
+        vertices,
     )
