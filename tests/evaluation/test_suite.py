@@ -291,22 +291,24 @@ def test_the_cache_key_names_the_estimator(tmp_path):
 def test_the_cache_key_follows_the_code_that_reports_the_estimates(
     tmp_path, monkeypatch, estimator
 ):
-    """A changed `common.estimate` (belief → reported numbers) must not reuse old runs, for
-    either estimator; a changed registration must not reuse the physics estimator's."""
+    """A changed `common.estimate` (belief → reported numbers) or run loop (`inference.session`:
+    when each estimate is reported) must not reuse old runs, for either estimator; a changed
+    registration must not reuse the physics estimator's."""
     from pushtoknow.common import estimate
     from pushtoknow.evaluation.suite import _cache_key
+    from pushtoknow.inference import session
     from pushtoknow.perception import registration
 
     (tmp_path / "model.pt").write_bytes(b"weights")
     args = (tmp_path, "uniform", ["catalogue:1"], EvaluationConfig(), ("constant",), estimator)
     before = _cache_key(*args)
-    for module in (estimate, registration):
+    for module in (estimate, session, registration):
         copy = tmp_path / f"{module.__name__}.py"
         copy.write_bytes(Path(module.__file__).read_bytes() + b"\n# changed\n")
         with monkeypatch.context() as m:
             m.setattr(module, "__file__", str(copy))
             changed = _cache_key(*args) != before
-        assert changed == (module is estimate or estimator == "physics"), module.__name__
+        assert changed == (module is not registration or estimator == "physics"), module.__name__
 
 
 def test_each_objects_physics_run_is_under_the_prior_the_testbed_draws_it_from(monkeypatch):

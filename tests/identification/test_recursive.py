@@ -164,6 +164,50 @@ def test_a_refit_of_every_push_is_the_kalman_update_of_them_all_from_the_prior()
     assert np.trace(up.cov) < np.trace(one.cov)  # the second push adds its information
 
 
+class BoxPool(LinearPool):
+    """The linear replay inside a box of fit coordinates (|u − centre| ≤ radius in every
+    coordinate) and a replay that reproduces nothing outside it (every sample 100 noise units
+    off, whatever u: a flat misfit the search cannot leave)."""
+
+    def __init__(self, a, b, centre: np.ndarray, radius: np.ndarray):
+        super().__init__(a, b)
+        self.centre, self.radius = centre, radius
+
+    def run_each(self, scene, phis, tracks):
+        out = super().run_each(scene, phis, tracks)
+        tmat = fit_transform()
+        for phi, pushes in zip(np.atleast_2d(phis), out, strict=True):
+            if np.any(np.abs(tmat @ normalise_params(phi) - self.centre) > self.radius):
+                for sim in pushes:
+                    sim[:] = 100.0 * SIGMAS
+        return out
+
+
+def test_a_push_still_poor_is_searched_again_from_the_restarts_and_keeps_the_best_fit():
+    """The belief's mean lies where the replay reproduces nothing: the descent stays there, a
+    poor fit. With `restart_chi2` the search starts again from each restart, and the one
+    inside the basin gives the Kalman update; without it, the restarts are not used."""
+    a, b, mean, cov, track, scene = problem(6)
+    y = np.column_stack([track.force, track.pose])
+    want_mean, want_cov = kalman(a, b, mean, cov, y)
+    std = np.sqrt(np.diag(cov))
+    pool = BoxPool(a, b, want_mean, 3 * std)
+    far = mean.copy()
+    far[2] = want_mean[2] + 5 * std[2]  # the CoM's first coordinate, outside the basin
+    cfg = EXACT.model_copy(update={"poor_fit_chi2": 2.0, "linearisation_rounds": 0})
+    restarts = [far + 1.0 * std, want_mean + 0.5 * std]
+    stuck = iterated_update(far, cov, track, scene, pool, SIGMAS, cfg, restarts=restarts)
+    assert stuck.poor_fit
+    found = iterated_update(
+        far, cov, track, scene, pool, SIGMAS,
+        cfg.model_copy(update={"restart_chi2": 2.0}), restarts=restarts,
+    )  # fmt: skip
+    assert not found.poor_fit
+    want_mean, want_cov = kalman(a, b, far, cov, y)  # the same data from the belief at `far`
+    np.testing.assert_allclose(found.mean, want_mean, atol=1e-5 * std.max())
+    np.testing.assert_allclose(found.cov, want_cov, rtol=1e-4, atol=1e-12)
+
+
 def test_a_quasi_static_push_leaves_mass_at_fixed_mu_m_and_inertia_at_the_prior():
     a, b, mean, cov, track, scene = problem(3, profile="constant")
     up = iterated_update(mean, cov, track, scene, LinearPool(a, b), SIGMAS, EXACT)

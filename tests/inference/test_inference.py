@@ -95,8 +95,10 @@ def check_estimate(e, index, spec=None):
 
 def test_infer_object_two_pushes(model, spec, uniform_run):
     result, _ = uniform_run
-    check_estimate(result.prior, 0)
+    check_estimate(result.prior, 0, spec)
     np.testing.assert_allclose(result.prior.mean_norm, model.prior.mean.numpy(), rtol=1e-6)
+    # the prior is reported with the first view's footprint, which bounds it (`see_object`)
+    assert result.prior.belief.outline is not None and result.prior.belief.com is not None
     assert len(result.estimates) == len(result.records) == len(result.poses) == PUSHES
     for k, (e, rec, poses) in enumerate(
         zip(result.estimates, result.records, result.poses, strict=True)

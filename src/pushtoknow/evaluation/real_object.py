@@ -429,12 +429,14 @@ def _run_filter(model, records, camera, seed: int, num_sigma_points: int | None)
     cfg = real_inference_config(len(records), num_sigma_points)
     est = LearnedFilterEstimator(model, cfg, seed)
     ex = RecordedExecutor(records, camera)
-    prior = est.estimate(0)
     estimates, pose_err = [], []
     for k, recorded in enumerate(records):
         view = ex.observe()
         rec = ex.execute(recorded.push)  # the recording's own push; nothing to choose
         pose0 = np.asarray(rec.pose[0], dtype=float)  # motion capture (module doc)
+        if k == 0:  # the prior is reported with the object seen
+            est.see_object(view, pose0)
+            prior = est.estimate(0)
         poses = est.update(rec, view, pose0)
         estimates.append(est.estimate(k + 1, rec.push))
         d = poses[-1] - rec.pose[-1]

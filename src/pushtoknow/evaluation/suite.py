@@ -264,9 +264,10 @@ def _cache_key(
     push_actions: np.ndarray | None = None,
 ) -> str:
     """The key of a cached inference run: the checkpoint's bytes, the settings, and the code
-    that turns every estimator's belief into its reported numbers (`common.estimate`: a
-    changed report must not reuse old runs). The physics estimator's adds its name, the code of
-    the filter and of its perception, and the pushes it replayed."""
+    that turns every estimator's belief into its reported numbers (`common.estimate`) and
+    decides when each is reported (`inference.session`): a changed report must not reuse old
+    runs. The physics estimator's adds its name, the code of the filter and of its perception,
+    and the pushes it replayed."""
     h = hashlib.sha256()
     ckpt = Path(model) / "model.pt" if Path(model).is_dir() else Path(model)
     # the checkpoint's bytes, not its path: a retrained model at the same path must not reuse
@@ -275,8 +276,10 @@ def _cache_key(
     settings = [policy, cfg.pushes, cfg.seed, cfg.sigma_points, objects, list(profiles)]
     settings.append({"format": CACHE_FORMAT})
     from pushtoknow.common import estimate
+    from pushtoknow.inference import session
 
-    h.update(Path(estimate.__file__).read_bytes())
+    for module in (estimate, session):
+        h.update(Path(module.__file__).read_bytes())
     if estimator != LEARNED_ESTIMATOR:
         settings.append({"estimator": estimator})
         if estimator == PHYSICS:

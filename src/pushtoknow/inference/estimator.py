@@ -209,6 +209,13 @@ class Estimator(ABC):
         `initial_pose` defines the object frame at the first push when given."""
 
     @abstractmethod
+    def see_object(self, view: View, pose0: np.ndarray) -> None:
+        """Take the object as seen in the first push's `view` at pose0 (3,), which fixes the
+        object frame: its outline bounds every later estimate (`common.estimate`), and a prior
+        that follows the footprint becomes the footprint's. Called before the prior is
+        reported; a later call changes nothing."""
+
+    @abstractmethod
     def update(self, record: PushRecord, view: View | None, pose0: np.ndarray) -> np.ndarray:
         """The belief after the executed push `record` of the object seen in `view` at pose0
         (None: a recording without images, its poses tracked). Returns the pose track (T, 3)
@@ -229,7 +236,7 @@ class Estimator(ABC):
     @abstractmethod
     def seen_object(self) -> tuple[np.ndarray, float] | None:
         """The object as seen at the first push: its outline (V, 2) (m, in the object frame the
-        estimates use) and height (m); None before the first update."""
+        estimates use) and height (m); None before `see_object`."""
 
     def close(self) -> None:  # noqa: B027 - optional hook
         """Release what the estimator holds (worker processes)."""

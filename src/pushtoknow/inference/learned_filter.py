@@ -102,8 +102,7 @@ class LearnedFilterEstimator(Estimator):
         fp = footprint_seen(view.s0, view.depth, view.outline_mask, self.camera, pose0)
         fp = torch.as_tensor(fp, dtype=torch.float32)
         if self._footprint is None:  # the first push's view defines the object frame exactly;
-            self._footprint = fp  # later ones depend on the estimated start θ
-            self._height = max(object_top(view.depth, view.s0, self.camera), MIN_HEIGHT)
+            self._keep_footprint(fp, view)  # later ones depend on the estimated start θ
         return PushContext(
             mask0=mask0,
             pose0=torch.as_tensor(pose0, dtype=torch.float32)[None].expand(b, -1),
@@ -116,6 +115,18 @@ class LearnedFilterEstimator(Estimator):
                 release_points(list(pushes), self.model.sim_config.push), dtype=torch.float32
             ),
         )
+
+    def _keep_footprint(self, fp: torch.Tensor, view: View) -> None:
+        """The footprint (V, 2) seen in the first push's view, and the height in its depth."""
+        self._footprint = fp
+        self._height = max(object_top(view.depth, view.s0, self.camera), MIN_HEIGHT)
+
+    def see_object(self, view: View, pose0: np.ndarray) -> None:
+        """The footprint seen in the first push's view (`perception.footprint.footprint_seen`)
+        becomes the filter's context and bounds its estimates; the learned prior stays."""
+        if self._footprint is None:
+            fp = footprint_seen(view.s0, view.depth, view.outline_mask, self.camera, pose0)
+            self._keep_footprint(torch.as_tensor(fp, dtype=torch.float32), view)
 
     def estimate(self, index: int, push: Push | None = None) -> PushEstimate:
         """The parameter belief as an estimate. m, μ and I_z are positive by construction

@@ -209,6 +209,11 @@ class PhysicsFilterEstimator(Estimator):
         assert self.scene is not None
         return self.scene
 
+    def see_object(self, view: View, pose0: np.ndarray) -> None:
+        """The replay scene of the outline seen in the first push's view (`_scene`); the
+        prior becomes its footprint's (`prior.footprint_prior`)."""
+        self._scene(view, pose0)
+
     def _use_scene(self, scene: ReplayScene) -> None:
         """Replay pushes in `scene`; the prior becomes its footprint's."""
         self.scene = dataclasses.replace(scene, sim_config=self.sim_config)
@@ -291,6 +296,7 @@ class PhysicsFilterEstimator(Estimator):
             self.filter_config,
             extra,
             ceiling=self.prior_cov,
+            restarts=self._refit_starts(self.mean)[1:],
         )
         self.tracks.append(track)
         cfg = self.filter_config

@@ -127,12 +127,14 @@ def infer_object(
     rng = stream(seed, "policy")  # candidates and the policy's choices
     speeds = profile_speeds(sim_config or model.sim_config)
     camera = model.camera
-    result = InferenceResult(est.estimate(0), [], truth, object_name=object_name)
-    result.estimator = est.name
     try:
         for k in range(config.pushes):
             view = executor.observe()
             pose0 = est.start_pose(view, initial_pose)
+            if k == 0:  # the prior is reported with the object seen (`Estimator.see_object`)
+                est.see_object(view, pose0)
+                result = InferenceResult(est.estimate(0), [], truth, object_name=object_name)
+                result.estimator = est.name
             cands, contacts = candidate_pushes(
                 view, camera, config.candidates, rng, speeds, config.profiles
             )
@@ -247,9 +249,11 @@ def infer_recorded(
     `sim_config`: the settings the pushes were recorded with (default: the model's)."""
     own = estimator is None
     est = estimator or make_estimator(model, config, stream_seed(seed, "estimator"), sim_config)
-    result = InferenceResult(est.estimate(0), [], truth, object_name=object_name)
-    result.estimator = est.name
     try:
+        if records and records[0].rgb is not None:  # the prior with the object seen
+            est.see_object(View.before(records[0]), np.asarray(records[0].pose[0], float))
+        result = InferenceResult(est.estimate(0), [], truth, object_name=object_name)
+        result.estimator = est.name
         for rec in records:
             view = View.before(rec) if rec.rgb is not None else None
             _update(est, result, rec, view, np.asarray(rec.pose[0], dtype=np.float64), on_push)
