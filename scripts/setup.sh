@@ -2,7 +2,8 @@
 # Installs everything pushtoknow needs on a fresh Debian/Ubuntu machine (idempotent):
 #   - Debian's headless OpenGL libraries for MuJoCo's EGL renderer (needs root or sudo)
 #   - a virtual environment in .venv with the pinned CPU build of PyTorch installed FIRST
-#     (so pip never resolves a bare `torch` to the multi-GB CUDA build), then the package.
+#     (so pip never resolves a bare `torch` to the multi-GB CUDA build), then the package with
+#     its numerical libraries at the versions in scripts/constraints.txt.
 # Usage: scripts/setup.sh [--dev]      (--dev adds the test and lint tools)
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -36,5 +37,5 @@ fi
 extra=""
 [ "${1:-}" = "--dev" ] && extra="[dev]"
 echo "[setup] installing pushtoknow$extra"
-$PIP install -q --disable-pip-version-check -e ".$extra"
+$PIP install -q --disable-pip-version-check -c scripts/constraints.txt -e ".$extra"
 echo "[setup] done"
