@@ -56,10 +56,15 @@ class LinearPool:
         for phi, trs in zip(np.atleast_2d(phis), tracks, strict=True):
             u = tmat @ normalise_params(phi)
             shift = [float((tr.start - START) @ tr.push.unit) / OFFSET_UNIT for tr in trs]
-            out.append([(self.a @ u + self.b + self.g * s).reshape(T, 5) for s in shift])
+            sims = [(self.a @ u + self.b + self.g * s).reshape(T, 5) for s in shift]
+            self.alter(u, sims)
+            out.append(sims)
         self.rollouts += len(out)
         self.push_rollouts += len(out) * len(tracks[0])
         return out
+
+    def alter(self, u: np.ndarray, sims: list[np.ndarray]) -> None:
+        """Change the replays `sims` (each (T, 5)) of fit coordinates u in place (here: none)."""
 
     def run(self, scene, phis, tracks):
         return self.run_each(scene, phis, [tracks] * len(np.atleast_2d(phis)))
@@ -173,14 +178,10 @@ class BoxPool(LinearPool):
         super().__init__(a, b)
         self.centre, self.radius = centre, radius
 
-    def run_each(self, scene, phis, tracks):
-        out = super().run_each(scene, phis, tracks)
-        tmat = fit_transform()
-        for phi, pushes in zip(np.atleast_2d(phis), out, strict=True):
-            if np.any(np.abs(tmat @ normalise_params(phi) - self.centre) > self.radius):
-                for sim in pushes:
-                    sim[:] = 100.0 * SIGMAS
-        return out
+    def alter(self, u, sims):
+        if np.any(np.abs(u - self.centre) > self.radius):
+            for sim in sims:
+                sim[:] = 100.0 * SIGMAS
 
 
 def test_a_push_still_poor_is_searched_again_from_the_restarts_and_keeps_the_best_fit():
@@ -269,14 +270,10 @@ class SteppedPool(LinearPool):
         super().__init__(a, b)
         self.at, self.amp = at, amp
 
-    def run_each(self, scene, phis, tracks):
-        out = super().run_each(scene, phis, tracks)
-        tmat = fit_transform()
-        for phi, pushes in zip(np.atleast_2d(phis), out, strict=True):
-            if (tmat @ normalise_params(phi))[1] > self.at:
-                for sim in pushes:
-                    sim[:, 2:] += self.amp * SIGMAS[2:]
-        return out
+    def alter(self, u, sims):
+        if u[1] > self.at:
+            for sim in sims:
+                sim[:, 2:] += self.amp * SIGMAS[2:]
 
 
 def test_posterior_linearisation_counts_a_replays_step_as_noise_not_information():

@@ -286,6 +286,7 @@ class PhysicsFilterEstimator(Estimator):
         seen = dataclasses.replace(record, pose=poses)
         (track,) = tracks_from_records([seen], self.sim_config)
         extra = self._closed_form_start(seen) if not self.updates else []
+        cfg = self.filter_config
         up = iterated_update(
             self.mean,
             self.cov,
@@ -293,13 +294,12 @@ class PhysicsFilterEstimator(Estimator):
             scene,
             self.pool,
             self.sigmas,
-            self.filter_config,
+            cfg,
             extra,
             ceiling=self.prior_cov,
-            restarts=self._refit_starts(self.mean)[1:],
+            restarts=self._refit_starts(self.mean)[1:] if cfg.restart_chi2 is not None else (),
         )
         self.tracks.append(track)
-        cfg = self.filter_config
         if up.poor_fit and len(self.tracks) > 1 and self._refits_tried < cfg.max_refits:
             self._refits_tried += 1
             batch = refit(
