@@ -176,6 +176,25 @@ def test_laplace_posterior_keeps_flat_directions_at_the_prior():
     assert with_step[1, 1] == pytest.approx(cov[1, 1] + 0.01)
 
 
+def test_laplace_posterior_counts_flatness_against_a_reference_belief():
+    """A recursive filter's belief, already narrow from earlier pushes, still takes a push whose
+    information is small against it but large against the prior it started from."""
+    from pushtoknow.identification.fit import laplace_posterior
+
+    prior = np.diag([0.3, 0.3, 0.33, 0.33, 0.31])
+    belief = prior / 100.0  # 100 times the prior's information on every coordinate
+    h = np.diag(100.0 / np.diagonal(prior))  # 100 times the prior's information
+    _, lam, _, flat = laplace_posterior(h, np.zeros(5), belief, 10.0)
+    np.testing.assert_allclose(lam, 1.0)  # 1× the belief's: flat against it
+    assert flat.all()
+    cov, _, _, flat = laplace_posterior(h, np.zeros(5), belief, 10.0, reference_cov=prior)
+    assert not flat.any()
+    np.testing.assert_allclose(np.diagonal(cov), np.diagonal(belief) / 2)
+    # against a reference that is the belief itself, the rule is the plain one
+    _, _, _, same = laplace_posterior(h, np.zeros(5), belief, 10.0, reference_cov=belief)
+    assert same.all()
+
+
 def test_information_scale_per_coordinate_widens_only_its_own():
     from pushtoknow.identification.fit import laplace_posterior
 

@@ -346,6 +346,7 @@ def laplace_posterior(
     prior_cov: np.ndarray,
     flat_information: float,
     information_scale: float | Sequence[float] = 1.0,
+    reference_cov: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Posterior covariance (5, 5) in fit coordinates from the data information h_data (5, 5)
     at the optimum, the prior covariance and the last Gauss–Newton step (5,).
@@ -354,15 +355,22 @@ def laplace_posterior(
     coordinate s: D^½ H D^½ with D = diag(s)), is diagonalised in prior-whitened
     coordinates (eigenvalue 1 = as informative as the prior); eigenvalues below
     `flat_information` are dropped (those directions keep the prior's width), the rest combine
-    with the prior, and the last step's outer product is added. Returns (cov, eigenvalues (5,)
-    ascending, eigenvectors (5, 5) in whitened coordinates, flat (5,) bool)."""
+    with the prior, and the last step's outer product is added. `reference_cov` (5, 5): the
+    belief whose information `flat_information` counts in (None: `prior_cov`'s; a recursive
+    filter's own prior, so that a push is weighed against what nothing had yet revealed rather
+    than against the pushes before it). Returns (cov, eigenvalues (5,) ascending, eigenvectors
+    (5, 5) in whitened coordinates, flat (5,) bool)."""
     chol = np.linalg.cholesky(prior_cov)
     dim = len(h_data)
     root = np.sqrt(np.broadcast_to(np.asarray(information_scale, dtype=np.float64), (dim,)))
     white = chol.T @ (root[:, None] * h_data * root[None, :]) @ chol
     lam, vecs = np.linalg.eigh(0.5 * (white + white.T))
     lam = np.clip(lam, 0.0, None)
-    flat = lam < flat_information
+    threshold = np.full(dim, float(flat_information))
+    if reference_cov is not None:  # the reference's information along each eigenvector
+        ref_white = chol.T @ np.linalg.solve(reference_cov, chol)
+        threshold *= np.einsum("ij,ik,kj->j", vecs, ref_white, vecs)
+    flat = lam < threshold
     kept = np.where(flat, 0.0, lam)
     cov = chol @ vecs @ np.diag(1.0 / (1.0 + kept)) @ vecs.T @ chol.T
     cov += np.outer(last_step, last_step)

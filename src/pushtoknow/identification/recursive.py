@@ -97,6 +97,11 @@ class PhysicsFilterConfig(Config):
         description="a direction with less information than this × the prior's "
         "keeps the prior's width and mean",
     )
+    flat_against_prior: bool = Field(
+        False,
+        description="count `flat_information` in the prior's information, not the belief's "
+        "before the push",
+    )
     information_scale: float = Field(
         0.5,
         gt=0,
@@ -273,14 +278,19 @@ def iterated_update(
     coordinate's variance at most the `ceiling` covariance's (5, 5) (the prior's; None: no
     bound), and the first that fits is kept. If none fits, the push is one the replay cannot
     reproduce at all, and the uninflated update stands."""
-    first = _update_once(mean, cov, [track], scene, pool, sigmas, config, extra_starts, restarts)
+    reference = ceiling if config.flat_against_prior else None
+    first = _update_once(
+        mean, cov, [track], scene, pool, sigmas, config, extra_starts, restarts, reference
+    )
     replays = first.replays
     for factor in config.inflation if first.poor_fit else ():
         d = np.full(len(mean), factor)
         if ceiling is not None:
             d = np.clip(np.diagonal(ceiling) / np.diagonal(cov), 1.0, factor)
         wide = np.sqrt(d)[:, None] * cov * np.sqrt(d)[None, :]
-        up = _update_once(mean, wide, [track], scene, pool, sigmas, config, extra_starts)
+        up = _update_once(
+            mean, wide, [track], scene, pool, sigmas, config, extra_starts, (), reference
+        )
         replays += up.replays
         if not up.poor_fit:
             return dataclasses.replace(up, inflation=float(np.max(d)), replays=replays)
@@ -316,9 +326,12 @@ def _update_once(
     config: PhysicsFilterConfig,
     extra_starts: Sequence[np.ndarray] = (),
     restarts: Sequence[np.ndarray] = (),
+    reference: np.ndarray | None = None,
 ) -> PhysicsUpdate:
     """One update of `iterated_update` from the belief (mean, cov), without inflation, by the
-    measurements of `tracks` (K pushes; K > 1: `refit`)."""
+    measurements of `tracks` (K pushes; K > 1: `refit`); `reference` (5, 5): the covariance
+    whose information a direction must exceed `flat_information` times to be revealed (None:
+    the belief's own)."""
     cfg = config
     tracks = list(tracks)
     res = ReplayResiduals(scene, tracks, pool, sigmas, rest_tolerance(cfg), cfg.pose_correlation)
@@ -332,6 +345,9 @@ def _update_once(
         cov[np.arange(5, 5 + k), np.arange(5, 5 + k)] = (cfg.contact_offset_std / OFFSET_UNIT) ** 2
         extra_starts = [np.append(u[:5], np.zeros(k)) for u in extra_starts]
         restarts = [np.append(u[:5], np.zeros(k)) for u in restarts]
+        if reference is not None:
+            reference = np.pad(reference, ((0, k), (0, k)))
+            reference[5:, 5:] = cov[5:, 5:]
     dim = len(mean)
     objective = Objective(res.residuals, n, res.robust, cfg.huber, mean, np.linalg.inv(cov))
     cost = objective.cost
@@ -410,7 +426,9 @@ def _update_once(
         h_data = jac_d.T @ (w_d[:, None] * jac_d)
         if blind:
             h_data = without_blind(h_data)
-        return laplace_posterior(h_data, step, cov, cfg.flat_information, cfg.information_scale)
+        return laplace_posterior(
+            h_data, step, cov, cfg.flat_information, cfg.information_scale, reference
+        )
 
     if cfg.linearisation_rounds == 0:
         assert jac is not None
