@@ -15,6 +15,7 @@ from pushtoknow.identification.recursive import (
     expected_information,
     iterated_update,
     refit,
+    widened_after_jump,
 )
 from pushtoknow.identification.replay import PushTrack, ReplayScene
 from pushtoknow.testbed.push import Push
@@ -248,6 +249,36 @@ def test_a_belief_too_sure_of_itself_is_inflated_until_the_push_fits():
     stuck = iterated_update(wrong, sure, track, scene, pool, SIGMAS, EXACT.model_copy(
         update={"poor_fit_chi2": 2.0}))  # fmt: skip
     assert stuck.poor_fit and stuck.inflation == 1.0
+
+
+def test_an_update_that_jumps_beyond_the_belief_is_widened_along_the_jump():
+    """The Kalman update stands where its move is consistent with the belief before it; from a
+    belief 5 of its std off on every coordinate, the push moves the mean beyond the gate, and
+    the covariance gains (1 − gate / d²) ΔΔᵀ, along Δ only."""
+    a, b, mean, cov, track, scene = problem(11)
+    y = np.column_stack([track.force, track.pose])
+    post_mean, post_cov = kalman(a, b, mean, cov, y)
+    delta = post_mean - mean
+    d2 = float(delta @ np.linalg.solve(cov, delta))
+    cfg = EXACT.model_copy(update={"jump_chi2": 2.0 * d2})  # a consistent move: unchanged
+    up = iterated_update(mean, cov, track, scene, LinearPool(a, b), SIGMAS, cfg)
+    np.testing.assert_allclose(up.cov, post_cov, rtol=1e-5, atol=1e-12)
+    off = post_mean + 5 * np.sqrt(np.diag(cov))
+    cfg = EXACT.model_copy(update={"jump_chi2": 20.0})
+    up = iterated_update(off, cov, track, scene, LinearPool(a, b), SIGMAS, cfg)
+    want_mean, want_cov = kalman(a, b, off, cov, y)
+    move = want_mean - off
+    jump = float(move @ np.linalg.solve(cov, move))
+    assert jump > 20.0
+    np.testing.assert_allclose(up.mean, want_mean, atol=1e-6 * np.sqrt(np.diag(cov)).max())
+    np.testing.assert_allclose(
+        up.cov, want_cov + (1 - 20.0 / jump) * np.outer(move, move), rtol=1e-5, atol=1e-12
+    )
+    # orthogonal to the move (in the belief's metric) nothing changes
+    widened = widened_after_jump(off, cov, want_mean, want_cov, 20.0)
+    ortho = np.linalg.svd(move[None])[2][1:]  # (4, 5) directions with v·Δ = 0
+    np.testing.assert_allclose(ortho @ widened @ ortho.T, ortho @ want_cov @ ortho.T, atol=1e-14)
+    assert widened_after_jump(off, cov, off, want_cov, 20.0) is want_cov
 
 
 def test_misfit_noise_widens_the_posterior_where_the_replay_misses():

@@ -102,6 +102,14 @@ class PhysicsFilterConfig(Config):
         description="count `flat_information` in the prior's information, not the belief's "
         "before the push",
     )
+    jump_chi2: float | None = Field(
+        None,
+        gt=0,
+        description="an update whose mean moves a squared Mahalanobis distance d² above this "
+        "under the belief before it adds (1 − jump_chi2 / d²) times the move's outer product "
+        "to its covariance: pushes that disagree widen the belief along the disagreement "
+        "(None: never)",
+    )
     information_scale: float = Field(
         0.5,
         gt=0,
@@ -277,7 +285,53 @@ def iterated_update(
     inflated by each of `inflation` in turn (an adaptive, fading-memory filter), each
     coordinate's variance at most the `ceiling` covariance's (5, 5) (the prior's; None: no
     bound), and the first that fits is kept. If none fits, the push is one the replay cannot
-    reproduce at all, and the uninflated update stands."""
+    reproduce at all, and the uninflated update stands. An update that moves the mean further
+    than the belief before it allowed is widened along the move (`widened_after_jump`,
+    `PhysicsFilterConfig.jump_chi2`)."""
+    up = _update_with_inflation(
+        mean, cov, track, scene, pool, sigmas, config, extra_starts, ceiling, restarts
+    )
+    if config.jump_chi2 is None:
+        return up
+    return dataclasses.replace(
+        up, cov=widened_after_jump(mean, cov, up.mean, up.cov, config.jump_chi2)
+    )
+
+
+def widened_after_jump(
+    mean_before: np.ndarray,
+    cov_before: np.ndarray,
+    mean: np.ndarray,
+    cov: np.ndarray,
+    gate: float,
+) -> np.ndarray:
+    """The posterior covariance (D, D) `cov`, plus (1 − gate / d²) ΔΔᵀ when the update's move
+    Δ = mean − mean_before (D,) has d² = Δᵀ cov_before⁻¹ Δ above `gate`. A consistent
+    filter's move lies within its belief's spread (d² ~ χ²_D at most), so a larger one says
+    the belief before was too sure of a mean the push contradicts; the added term, the
+    moment match of the two means' mixture grown towards ΔΔᵀ as d² exceeds the gate, keeps
+    both inside the belief along Δ and leaves the other directions as they are."""
+    delta = np.asarray(mean, dtype=np.float64) - mean_before
+    d2 = float(delta @ np.linalg.solve(cov_before, delta))
+    if d2 <= gate:
+        return cov
+    return cov + (1.0 - gate / d2) * np.outer(delta, delta)
+
+
+def _update_with_inflation(
+    mean: np.ndarray,
+    cov: np.ndarray,
+    track: PushTrack,
+    scene: ReplayScene,
+    pool: RolloutPool,
+    sigmas: np.ndarray,
+    config: PhysicsFilterConfig,
+    extra_starts: Sequence[np.ndarray],
+    ceiling: np.ndarray | None,
+    restarts: Sequence[np.ndarray],
+) -> PhysicsUpdate:
+    """`iterated_update` before the jump rule: the update, repeated from the inflated belief
+    when it is poor (`PhysicsFilterConfig.inflation`)."""
     reference = ceiling if config.flat_against_prior else None
     first = _update_once(
         mean, cov, [track], scene, pool, sigmas, config, extra_starts, restarts, reference
