@@ -279,6 +279,12 @@ def test_an_update_that_jumps_beyond_the_belief_is_widened_along_the_jump():
     ortho = np.linalg.svd(move[None])[2][1:]  # (4, 5) directions with v·Δ = 0
     np.testing.assert_allclose(ortho @ widened @ ortho.T, ortho @ want_cov @ ortho.T, atol=1e-14)
     assert widened_after_jump(off, cov, off, want_cov, 20.0) is want_cov
+    # under a ceiling (the prior) no variance grows beyond it, and the result is a covariance
+    ceiling = 0.5 * np.diag(np.diagonal(widened))
+    capped = widened_after_jump(off, cov, want_mean, want_cov, 20.0, ceiling)
+    bound = np.maximum(np.diagonal(ceiling), np.diagonal(want_cov))
+    np.testing.assert_allclose(np.diagonal(capped), np.minimum(np.diagonal(widened), bound))
+    assert np.linalg.eigvalsh(capped).min() > 0
 
 
 def test_misfit_noise_widens_the_posterior_where_the_replay_misses():

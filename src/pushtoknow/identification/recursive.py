@@ -294,7 +294,7 @@ def iterated_update(
     if config.jump_chi2 is None:
         return up
     return dataclasses.replace(
-        up, cov=widened_after_jump(mean, cov, up.mean, up.cov, config.jump_chi2)
+        up, cov=widened_after_jump(mean, cov, up.mean, up.cov, config.jump_chi2, ceiling)
     )
 
 
@@ -304,18 +304,26 @@ def widened_after_jump(
     mean: np.ndarray,
     cov: np.ndarray,
     gate: float,
+    ceiling: np.ndarray | None = None,
 ) -> np.ndarray:
     """The posterior covariance (D, D) `cov`, plus (1 − gate / d²) ΔΔᵀ when the update's move
     Δ = mean − mean_before (D,) has d² = Δᵀ cov_before⁻¹ Δ above `gate`. A consistent
     filter's move lies within its belief's spread (d² ~ χ²_D at most), so a larger one says
     the belief before was too sure of a mean the push contradicts; the added term, the
     moment match of the two means' mixture grown towards ΔΔᵀ as d² exceeds the gate, keeps
-    both inside the belief along Δ and leaves the other directions as they are."""
+    both inside the belief along Δ and leaves the other directions as they are. `ceiling`
+    (D, D): no coordinate's variance is widened beyond its (the prior's; each coordinate's
+    row and column scaled, so the result stays a covariance)."""
     delta = np.asarray(mean, dtype=np.float64) - mean_before
     d2 = float(delta @ np.linalg.solve(cov_before, delta))
     if d2 <= gate:
         return cov
-    return cov + (1.0 - gate / d2) * np.outer(delta, delta)
+    wide = cov + (1.0 - gate / d2) * np.outer(delta, delta)
+    if ceiling is None:
+        return wide
+    bound = np.maximum(np.diagonal(ceiling), np.diagonal(cov))  # never narrower than cov
+    scale = np.sqrt(np.minimum(1.0, bound / np.diagonal(wide)))
+    return scale[:, None] * wide * scale[None, :]
 
 
 def _update_with_inflation(
