@@ -12,8 +12,9 @@ on the force), ū, P the belief before the push; Levenberg–Marquardt steps wit
 Jacobians from batched replays. The posterior covariance is the Laplace one at that point
 (`fit.laplace_posterior`), its Jacobian statistically linearised across the belief's spread
 (`optimise.linearised_information`, so that a replay's jitter counts as noise rather than
-information). Directions the push carries less than `flat_information` times the prior's
-information about keep the prior's width and mean. Each channel group's noise is raised
+information). Directions the push carries less than `flat_information` times the belief's
+information about (the belief before the push; the filter's prior with `flat_against_prior`)
+keep the belief's width and mean. Each channel group's noise is raised
 to the push's own misfit where the replay cannot reproduce it (a perceived outline or pose track
 the replay only approximates), counted by its effective number of samples, so model error
 widens the intervals instead of narrowing them.
@@ -94,8 +95,8 @@ class PhysicsFilterConfig(Config):
     flat_information: float = Field(
         10.0,
         ge=0,
-        description="a direction with less information than this × the prior's "
-        "keeps the prior's width and mean",
+        description="a direction with less information than this × the belief's before "
+        "the push (the prior's with `flat_against_prior`) keeps the belief's width and mean",
     )
     flat_against_prior: bool = Field(
         False,
