@@ -22,9 +22,9 @@ import numpy as np
 import torch
 from scipy.stats import norm
 
-from pushtoknow.bench import machine_description, median_or_nan
+from pushtoknow.bench import machine_description, median_or_nan, pooled_accuracy
 from pushtoknow.common.params import PARAM_NAMES
-from pushtoknow.evaluation.metrics import coverage, param_ranges
+from pushtoknow.evaluation.metrics import param_ranges
 
 Z90 = float(norm.ppf(0.95))  # two-sided 90% quantile of the standard normal, 1.645
 DEFAULT_OBJECTS_SEED = 2026
@@ -101,15 +101,7 @@ def summarise(rows: Sequence[ObjectRow]) -> EstimatorSummary:
     """Pool per-object rows into the summary (see `EstimatorSummary`); NaN where there is
     nothing to pool."""
     updates = [s for r in rows for s in r.update_s]
-    error_mean = {
-        p: float(np.mean([r.error_norm[p] for r in rows])) if rows else float("nan")
-        for p in PARAM_NAMES
-    }
-    if rows:
-        z = np.array([[r.zscore[p] for p in PARAM_NAMES] for r in rows])
-        covered = {p: coverage(z, 0.9)[p] for p in PARAM_NAMES}
-    else:
-        covered = dict.fromkeys(PARAM_NAMES, float("nan"))
+    error_mean, overall, covered = pooled_accuracy(rows)
     outside = sum(not r.mean_inside_interval[p] for r in rows for p in PARAM_NAMES)
     return EstimatorSummary(
         objects=len(rows),
@@ -118,7 +110,7 @@ def summarise(rows: Sequence[ObjectRow]) -> EstimatorSummary:
         update_s_max=float(max(updates)) if updates else float("nan"),
         object_s_median=median_or_nan([r.object_s for r in rows]),
         error_norm_mean=error_mean,
-        error_norm_overall=float(np.mean(list(error_mean.values()))),
+        error_norm_overall=overall,
         coverage90=covered,
         means_outside_interval=int(outside),
     )

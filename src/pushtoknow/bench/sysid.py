@@ -26,9 +26,9 @@ from dataclasses import asdict, dataclass
 import numpy as np
 import torch
 
-from pushtoknow.bench import machine_description, median_or_nan
+from pushtoknow.bench import machine_description, median_or_nan, pooled_accuracy
 from pushtoknow.common.params import PARAM_NAMES
-from pushtoknow.evaluation.metrics import coverage, param_ranges
+from pushtoknow.evaluation.metrics import param_ranges
 
 SCENE_NOTE = (
     "known scene: sysid is given the true outline and height and the simulator's pose track "
@@ -108,22 +108,14 @@ class SysidBench:
 
 def summarise(rows: Sequence[SysidObjectRow]) -> SysidSummary:
     """Pool rows into the summary (see `SysidSummary`); NaN where there is nothing to pool."""
-    error_mean = {
-        p: float(np.mean([r.error_norm[p] for r in rows])) if rows else float("nan")
-        for p in PARAM_NAMES
-    }
-    if rows:
-        z = np.array([[r.zscore[p] for p in PARAM_NAMES] for r in rows])
-        covered = {p: coverage(z, 0.9)[p] for p in PARAM_NAMES}
-    else:
-        covered = dict.fromkeys(PARAM_NAMES, float("nan"))
+    error_mean, overall, covered = pooled_accuracy(rows)
     return SysidSummary(
         objects=len(rows),
         fit_s_median=median_or_nan([r.fit_s for r in rows]),
         object_s_median=median_or_nan([r.object_s for r in rows]),
         evaluations_median=median_or_nan([r.evaluations for r in rows]),
         error_norm_mean=error_mean,
-        error_norm_overall=float(np.mean(list(error_mean.values()))),
+        error_norm_overall=overall,
         mu_m_rel_error_mean_abs=float(np.mean([abs(r.mu_m_rel_error) for r in rows]))
         if rows
         else float("nan"),

@@ -208,6 +208,24 @@ def bench_estimator_cmd(
         _print_estimator_bench(report)
 
 
+def _print_accuracy_summary(summary) -> None:
+    """The summary table of an accuracy bench: mean |error| / catalogue range and 90% coverage
+    per parameter, and the overall error."""
+    from rich.table import Table
+
+    from pushtoknow.common.params import PARAM_NAMES
+
+    accuracy = Table(title="summary: accuracy", title_justify="left")
+    accuracy.add_column("parameter")
+    accuracy.add_column("mean |err|/range", justify="right")
+    accuracy.add_column("90% coverage", justify="right")
+    for p in PARAM_NAMES:
+        row = (f"{summary.error_norm_mean[p]:.3f}", f"{summary.coverage90[p]:.2f}")
+        accuracy.add_row(p, *row)
+    accuracy.add_row("overall", f"{summary.error_norm_overall:.3f}", "")
+    console.print(accuracy)
+
+
 def _print_estimator_bench(report) -> None:
     from rich.table import Table
 
@@ -234,14 +252,7 @@ def _print_estimator_bench(report) -> None:
             str(sum(not v for v in r.mean_inside_interval.values())),
         )
     console.print(per_object)
-    accuracy = Table(title="summary: accuracy", title_justify="left")
-    accuracy.add_column("parameter")
-    accuracy.add_column("mean |err|/range", justify="right")
-    accuracy.add_column("90% coverage", justify="right")
-    for p in PARAM_NAMES:
-        accuracy.add_row(p, f"{s.error_norm_mean[p]:.3f}", f"{s.coverage90[p]:.2f}")
-    accuracy.add_row("overall", f"{s.error_norm_overall:.3f}", "")
-    console.print(accuracy)
+    _print_accuracy_summary(s)
     print_result(
         {
             "update_s_median": s.update_s_median,
@@ -375,14 +386,7 @@ def _print_sysid_bench(report) -> None:
             f"{100 * r.mu_m_rel_error:+.1f}%",
         )
     console.print(per_object)
-    accuracy = Table(title="summary: accuracy", title_justify="left")
-    accuracy.add_column("parameter")
-    accuracy.add_column("mean |err|/range", justify="right")
-    accuracy.add_column("90% coverage", justify="right")
-    for p in PARAM_NAMES:
-        accuracy.add_row(p, f"{s.error_norm_mean[p]:.3f}", f"{s.coverage90[p]:.2f}")
-    accuracy.add_row("overall", f"{s.error_norm_overall:.3f}", "")
-    console.print(accuracy)
+    _print_accuracy_summary(s)
     print_result(
         {
             "fit_s_median": s.fit_s_median,
