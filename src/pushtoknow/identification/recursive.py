@@ -289,14 +289,28 @@ def iterated_update(
     reproduce at all, and the uninflated update stands. An update that moves the mean further
     than the belief before it allowed is widened along the move (`widened_after_jump`,
     `PhysicsFilterConfig.jump_chi2`)."""
-    up = _update_with_inflation(
-        mean, cov, track, scene, pool, sigmas, config, extra_starts, ceiling, restarts
+    reference = ceiling if config.flat_against_prior else None
+    first = _update_once(
+        mean, cov, [track], scene, pool, sigmas, config, extra_starts, restarts, reference
     )
-    if config.jump_chi2 is None:
-        return up
-    return dataclasses.replace(
-        up, cov=widened_after_jump(mean, cov, up.mean, up.cov, config.jump_chi2, ceiling)
-    )
+    up = first
+    for factor in config.inflation if first.poor_fit else ():
+        d = np.full(len(mean), factor)
+        if ceiling is not None:
+            d = np.clip(np.diagonal(ceiling) / np.diagonal(cov), 1.0, factor)
+        wide = np.sqrt(d)[:, None] * cov * np.sqrt(d)[None, :]
+        again = _update_once(
+            mean, wide, [track], scene, pool, sigmas, config, extra_starts, (), reference
+        )
+        replays = up.replays + again.replays
+        if not again.poor_fit:
+            up = dataclasses.replace(again, inflation=float(np.max(d)), replays=replays)
+            break
+        up = dataclasses.replace(up, replays=replays)
+    if config.jump_chi2 is not None:
+        jumped = widened_after_jump(mean, cov, up.mean, up.cov, config.jump_chi2, ceiling)
+        up = dataclasses.replace(up, cov=jumped)
+    return up
 
 
 def widened_after_jump(
@@ -325,39 +339,6 @@ def widened_after_jump(
     bound = np.maximum(np.diagonal(ceiling), np.diagonal(cov))  # never narrower than cov
     scale = np.sqrt(np.minimum(1.0, bound / np.diagonal(wide)))
     return scale[:, None] * wide * scale[None, :]
-
-
-def _update_with_inflation(
-    mean: np.ndarray,
-    cov: np.ndarray,
-    track: PushTrack,
-    scene: ReplayScene,
-    pool: RolloutPool,
-    sigmas: np.ndarray,
-    config: PhysicsFilterConfig,
-    extra_starts: Sequence[np.ndarray],
-    ceiling: np.ndarray | None,
-    restarts: Sequence[np.ndarray],
-) -> PhysicsUpdate:
-    """`iterated_update` before the jump rule: the update, repeated from the inflated belief
-    when it is poor (`PhysicsFilterConfig.inflation`)."""
-    reference = ceiling if config.flat_against_prior else None
-    first = _update_once(
-        mean, cov, [track], scene, pool, sigmas, config, extra_starts, restarts, reference
-    )
-    replays = first.replays
-    for factor in config.inflation if first.poor_fit else ():
-        d = np.full(len(mean), factor)
-        if ceiling is not None:
-            d = np.clip(np.diagonal(ceiling) / np.diagonal(cov), 1.0, factor)
-        wide = np.sqrt(d)[:, None] * cov * np.sqrt(d)[None, :]
-        up = _update_once(
-            mean, wide, [track], scene, pool, sigmas, config, extra_starts, (), reference
-        )
-        replays += up.replays
-        if not up.poor_fit:
-            return dataclasses.replace(up, inflation=float(np.max(d)), replays=replays)
-    return dataclasses.replace(first, replays=replays)
 
 
 def refit(
