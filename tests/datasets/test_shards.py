@@ -54,6 +54,8 @@ def test_round_trip_matches_direct_simulation(dataset):
         assert np.array_equal(a.rgb, b.rgb)
         assert np.allclose(a.depth, b.depth, atol=1e-3)  # stored as float16
         assert a.push == b.push
+        assert a.outline_mask_end is not None
+        assert np.array_equal(a.outline_mask_end, b.outline_mask_end)
 
 
 def test_workers_do_not_change_the_data(tmp_path, dataset):

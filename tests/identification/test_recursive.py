@@ -2,6 +2,8 @@
 fit coordinates, the iterated update is the Kalman update and the expected information is the
 Gaussian entropy reduction."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -117,6 +119,37 @@ def test_the_iterated_update_is_the_kalman_update_on_a_linear_simulator(seed, rh
     np.testing.assert_allclose(up.mean, want_mean, atol=1e-6 * np.sqrt(np.diag(cov)).max())
     np.testing.assert_allclose(up.cov, want_cov, rtol=1e-5, atol=1e-12)
     assert up.identified == 5 and not up.poor_fit
+
+
+@settings(max_examples=10, deadline=None)
+@given(st.integers(0, 10_000), st.sampled_from([0.0, 0.7]))
+def test_an_end_pose_is_one_more_measurement_of_the_replays_last_pose(seed, rho):
+    """A track's `end_pose` (the pose at rest registered in an image after the push) is the
+    Kalman update's measurement of the replay's last pose with its own noise, independent of
+    the track's; without `end_pose_noise` it is unused."""
+    a, b, mean, cov, track, scene = problem(seed)
+    end_sigmas = np.array([3e-4, 3e-4, 0.004])
+    rng = np.random.default_rng(seed + 1)
+    truth = mean + np.linalg.cholesky(cov) @ rng.normal(size=5)
+    last = slice((T - 1) * 5 + 2, T * 5)
+    end = a[last] @ truth + b[last] + rng.normal(size=3) * end_sigmas
+    ended = dataclasses.replace(track, end_pose=end)
+    cfg = EXACT.model_copy(update={"pose_correlation": rho, "end_pose_noise": (3e-4, 0.004)})
+    up = iterated_update(mean, cov, ended, scene, LinearPool(a, b), SIGMAS, cfg)
+    # the exact reference: the track's posterior updated by the end pose
+    y = np.column_stack([track.force, track.pose])
+    m1, p1 = kalman(a, b, mean, cov, y, rho)
+    h = a[last]
+    gain = p1 @ h.T @ np.linalg.inv(h @ p1 @ h.T + np.diag(end_sigmas**2))
+    want_mean, want_cov = m1 + gain @ (end - h @ m1 - b[last]), p1 - gain @ h @ p1
+    np.testing.assert_allclose(up.mean, want_mean, atol=1e-6 * np.sqrt(np.diag(cov)).max())
+    np.testing.assert_allclose(up.cov, want_cov, rtol=1e-5, atol=1e-12)
+    unused = iterated_update(
+        mean, cov, ended, scene, LinearPool(a, b), SIGMAS,
+        cfg.model_copy(update={"end_pose_noise": None}),
+    )  # fmt: skip
+    np.testing.assert_allclose(unused.mean, m1, atol=1e-6 * np.sqrt(np.diag(cov)).max())
+    assert np.linalg.det(up.cov) < np.linalg.det(unused.cov)
 
 
 def test_the_contact_offset_is_estimated_jointly_and_marginalised():

@@ -236,15 +236,19 @@ def test_the_physics_filter_gives_the_recorded_beliefs():
 def test_later_start_poses_are_registered_to_the_first_outline_where_visnet_is_lost(model):
     """random:101:9, a 4 cm quadrilateral VisNet loses (its start poses 10–20 mm and 10–160°
     off): each later push starts from the first view's contour registered to the push's mask,
-    within 1 mm and 2.5° of the true pose. Perception only: no update is fitted."""
+    within 1 mm and 2.5° of the true pose, and so does each push's end pose, registered on the
+    mask taken at rest after it. Perception only: no update is fitted."""
     from pushtoknow.common.angles import wrap_angle
 
     class PerceptionOnly(PhysicsFilterEstimator):
         def update(self, record, view, pose0):
             starts.append((np.asarray(pose0), np.asarray(record.pose[0])))
-            return self.perceive(record, view, pose0)
+            poses = self.perceive(record, view, pose0)
+            ends.append((self.end_pose(record, poses[-1]), record.pose[-1]))
+            return poses
 
     starts: list = []
+    ends: list = []
     cfg = InferenceConfig(pushes=3, estimator="physics", candidates=4)
     est = PerceptionOnly(model, cfg)
     infer_simulated(model, load_object_spec("random:101:9"), cfg, seed=0, estimator=est)
@@ -252,6 +256,9 @@ def test_later_start_poses_are_registered_to_the_first_outline_where_visnet_is_l
     for seen, true in starts[1:]:
         assert np.hypot(*(seen[:2] - true[:2])) < 1e-3
         assert abs(wrap_angle(seen[2] - true[2])) < np.radians(2.5)
+    for seen, true in ends:  # the pose at rest after each push, θ unwrapped as the track's
+        assert np.hypot(*(seen[:2] - true[:2])) < 1e-3
+        assert abs(seen[2] - true[2]) < np.radians(2.5)
 
 
 def test_the_prior_is_reported_with_the_outline_seen(model):

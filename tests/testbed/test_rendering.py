@@ -90,7 +90,8 @@ def test_orientation_marker_changes_pixels_not_physics():
 
 def test_outline_mask_is_the_top_face_at_four_times_the_resolution():
     """S_0 at the outline resolution shows the top face (13 mm up) as the camera model places
-    it, and agrees with S_0 where a whole image pixel is inside or outside."""
+    it, and agrees with S_0 where a whole image pixel is inside or outside; so does the mask
+    at the push's end."""
     spec = catalogue_object(300)
     sim = PushSimulator(spec)
     sim.reset((0.03, -0.02, 0.7))
@@ -100,6 +101,10 @@ def test_outline_mask_is_the_top_face_at_four_times_the_resolution():
     assert rec.outline_mask.shape == (k * 64, k * 64)
     expected = rasterise_footprint(spec.footprint.vertices, rec.pose[0], fine, spec.height)
     assert iou(rec.outline_mask, expected) >= 0.99  # measured 0.999; a fine pixel off: 0.95
+    rec = sim.execute(Push((-0.08, 0.01), 0.0), np.random.default_rng(0), render=True)
+    assert np.hypot(*(rec.pose[-1, :2] - rec.pose[0, :2])) > 0.01  # the push moved it
+    end = rasterise_footprint(spec.footprint.vertices, rec.pose[-1], fine, spec.height)
+    assert iou(rec.outline_mask_end, end) >= 0.99  # the same mask at rest after the push
     share = rec.outline_mask.reshape(64, k, 64, k).mean((1, 3))
     whole = (share == 0) | (share == 1)
     assert (rec.s0[whole] == (share[whole] == 1)).all()

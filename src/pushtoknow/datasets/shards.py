@@ -114,8 +114,9 @@ def _shard_bytes(
                     if getattr(r, name) is not None:
                         p.create_dataset(name, data=getattr(r, name), **CHECKSUM)
                 p.create_dataset("s0", data=r.s0, **COMPRESSION)
-                if r.outline_mask is not None:
-                    p.create_dataset("outline_mask", data=r.outline_mask, **COMPRESSION)
+                for name in ("outline_mask", "outline_mask_end"):
+                    if getattr(r, name) is not None:
+                        p.create_dataset(name, data=getattr(r, name), **COMPRESSION)
                 if r.pusher_fine is not None:
                     p.create_dataset("pusher_fine", data=r.pusher_fine, **CHECKSUM)
                 T, H, W = r.depth.shape
@@ -271,10 +272,11 @@ def read_push(path: Path, grp: h5py.Group, images: bool = True) -> PushRecord:
         rgb = _read(path, grp, "rgb")
         depth = _read(path, grp, "depth").astype(np.float32)
     outline = _read(path, grp, "outline_mask") if "outline_mask" in grp else None
+    outline_end = _read(path, grp, "outline_mask_end") if "outline_mask_end" in grp else None
     fine = _read(path, grp, "pusher_fine") if "pusher_fine" in grp else None
     return PushRecord(
         push=push, rgb=rgb, depth=depth, s0=_read(path, grp, "s0"), outline_mask=outline,
-        pusher_fine=fine, **fields,
+        pusher_fine=fine, outline_mask_end=outline_end, **fields,
     )  # fmt: skip
 
 

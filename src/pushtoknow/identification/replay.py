@@ -56,7 +56,9 @@ class PushTrack:
     pad (T, 2) or None: the recorded pad track to drive the pad along (m, world), for a push
     that does not follow the testbed's speed profiles (a real pusher); None replays the
     push's profile from `start`; pad_fine (N, 3) [t, x, y] or None: the same pusher at its
-    recorder's finer rate, which the pad then follows (`PushRecord.pusher_fine`).
+    recorder's finer rate, which the pad then follows (`PushRecord.pusher_fine`); end_pose (3,)
+    or None: the object's pose at rest after the push measured apart from the track (registered
+    in an image taken then, θ unwrapped as the track's).
     """
 
     push: Push
@@ -66,6 +68,7 @@ class PushTrack:
     pose: np.ndarray
     pad: np.ndarray | None = None
     pad_fine: np.ndarray | None = None
+    end_pose: np.ndarray | None = None
 
 
 @dataclass(frozen=True)

@@ -84,7 +84,10 @@ class ReplayResiduals:
     correlation `pose_correlation` (perception's error drifts from frame to frame), its
     residuals whitened (`whiten_ar1`). `rest_tolerance` (m, rad): keep one pose sample of each
     observed track's final stretch at rest (`rest_weights`); None: every sample counts. A real
-    pusher's force samples with the object at rest carry no residual (`resting_force_weights`)."""
+    pusher's force samples with the object at rest carry no residual (`resting_force_weights`).
+    `end_noise` (m, rad): the noise of each track's `end_pose` where it has one, whose misfit
+    against the replay's last pose follows the tracks' samples as 3 more data residuals per
+    such track (x, y, θ; None: end poses unused)."""
 
     def __init__(
         self,
@@ -94,6 +97,7 @@ class ReplayResiduals:
         sigmas: np.ndarray,
         rest_tolerance: tuple[float, float] | None = None,
         pose_correlation: float = 0.0,
+        end_noise: tuple[float, float] | None = None,
     ):
         self.scene, self.tracks, self.pool = scene, tracks, pool
         self.sigmas = np.array(sigmas, dtype=np.float64)  # a copy: a coarse stage scales it
@@ -101,7 +105,15 @@ class ReplayResiduals:
         self.t_inv = np.linalg.inv(fit_transform())
         self.obs = np.concatenate([np.column_stack([t.force, t.pose])[1:] for t in tracks])
         self.push_lengths = [len(t.pose) - 1 for t in tracks]
-        self.n_data = self.obs.size
+        self.n_samples = self.obs.size  # the tracks' samples' residuals, (N, 5) flattened
+        self.ended = [
+            i for i, t in enumerate(tracks) if end_noise is not None and t.end_pose is not None
+        ]
+        self.end_obs = np.array([tracks[i].end_pose for i in self.ended]).reshape(-1, 3)
+        self.end_rows = np.cumsum(self.push_lengths)[self.ended] - 1  # each one's last sample
+        position, angle = end_noise or (1.0, 1.0)
+        self.end_sigmas = np.array([position, position, angle])
+        self.n_data = self.n_samples + self.end_obs.size
         self.pose_correlation = float(pose_correlation)
         self.weights = np.ones(self.obs.shape)  # (N, 5) per-sample weights of the residuals
         self.weights[:, :2] = np.concatenate([resting_force_weights(t)[1:] for t in tracks])
@@ -111,7 +123,7 @@ class ReplayResiduals:
             )[:, None]
         robust = np.zeros(self.obs.shape, dtype=bool)
         robust[:, :2] = True
-        self.robust = robust.reshape(-1)
+        self.robust = np.concatenate([robust.reshape(-1), np.zeros(self.end_obs.size, bool)])
 
     def standardise(self, data: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:
         """Replayed-minus-observed samples in noise units (..., N, 5) as independent
@@ -161,7 +173,12 @@ class ReplayResiduals:
         us = np.atleast_2d(us)
         sim = np.stack(self.simulate(us))
         data = self.standardise((sim - self.obs[None]) / self.sigmas)
-        return np.concatenate([data.reshape(len(us), -1), self._pen], axis=1)
+        end = sim[:, self.end_rows, 2:] - self.end_obs[None]
+        end[..., 2] = wrap_angle(end[..., 2])
+        end = end / self.end_sigmas
+        return np.concatenate(
+            [data.reshape(len(us), -1), end.reshape(len(us), -1), self._pen], axis=1
+        )
 
 
 def huber_weights(r: np.ndarray, k: float, robust: np.ndarray) -> np.ndarray:

@@ -29,6 +29,7 @@ import torch
 from shapely.geometry import Polygon
 
 from pushtoknow.active.selection import ScoreName
+from pushtoknow.common.angles import wrap_angle
 from pushtoknow.common.errors import DatasetError
 from pushtoknow.common.estimate import com_region
 from pushtoknow.common.params import denormalise_params, normalise_params, space_scale
@@ -58,7 +59,12 @@ from pushtoknow.inference.estimator import (
     belief_to_estimate,
 )
 from pushtoknow.models.checkpoint import TrainedModel
-from pushtoknow.perception.footprint import object_top, replay_contour, replay_outline
+from pushtoknow.perception.footprint import (
+    object_top,
+    outline_contour,
+    replay_contour,
+    replay_outline,
+)
 from pushtoknow.perception.registration import outline_points, register
 from pushtoknow.perception.visnet import start_pose, visnet_poses
 from pushtoknow.testbed.executor import View
@@ -144,6 +150,7 @@ class PhysicsFilterEstimator(Estimator):
         self._prev: tuple[np.ndarray, np.ndarray] | None = None  # (S_0, pose0) of last push
         self._last_pose: np.ndarray | None = None
         self._outline: np.ndarray | None = None  # (N, 2) first view's contour, object frame
+        self._top: float | None = None  # m: the object's top seen in the first view
         cfg = self.filter_config
         tactile = self.sim_config.tactile.force_noise_std
         force = cfg.force_noise or (tactile if tactile > 0 else UNKNOWN_FORCE_NOISE)
@@ -276,8 +283,21 @@ class PhysicsFilterEstimator(Estimator):
             if self._outline is None:
                 contour = replay_contour(view.s0, view.depth, view.outline_mask, self.camera)
                 self._outline = outline_points(contour, pose0)
+                self._top = object_top(view.depth, view.s0, self.camera)
         self._last_pose = poses[-1]
         return poses
+
+    def end_pose(self, record: PushRecord, guess: np.ndarray) -> np.ndarray | None:
+        """(3,) the object's pose at rest after the push: the first view's contour registered
+        (`perception.registration.register`) on the outline mask taken then
+        (`PushRecord.outline_mask_end`) from `guess` (3,), θ unwrapped near it; None without
+        that mask."""
+        if record.outline_mask_end is None or self._outline is None or self._top is None:
+            return None
+        contour = outline_contour(record.outline_mask_end, self.camera, self._top)
+        pose = register(self._outline, contour, guess).pose.copy()
+        pose[2] = guess[2] + wrap_angle(pose[2] - guess[2])
+        return pose
 
     def update(self, record: PushRecord, view: View | None, pose0: np.ndarray) -> np.ndarray:
         """The belief after the executed push (module doc); returns VisNet's pose track."""
@@ -285,6 +305,8 @@ class PhysicsFilterEstimator(Estimator):
         poses = self.perceive(record, view, pose0)
         seen = dataclasses.replace(record, pose=poses)
         (track,) = tracks_from_records([seen], self.sim_config)
+        if self.filter_config.end_pose_noise is not None:
+            track = dataclasses.replace(track, end_pose=self.end_pose(record, poses[-1]))
         extra = self._closed_form_start(seen) if not self.updates else []
         cfg = self.filter_config
         up = iterated_update(

@@ -225,4 +225,10 @@ def replay_contour(
     on the outline-resolution mask (else S_0 (H, W)) with `REPLAY_SMOOTHING`, on the plane of
     the object's top found in the depth (H, W) m."""
     mask = s0 if outline_mask is None else outline_mask
-    return mask_contour(mask, camera, object_top(depth, s0, camera), smoothing=REPLAY_SMOOTHING)
+    return outline_contour(mask, camera, object_top(depth, s0, camera))
+
+
+def outline_contour(mask: np.ndarray, camera: CameraModel, top: float) -> Contour:
+    """The contour (world, m) traced as `replay_contour` traces it on an object mask (H, W) or
+    (kH, kW), on the plane at height `top` (m, the object's top)."""
+    return mask_contour(mask, camera, top, smoothing=REPLAY_SMOOTHING)

@@ -38,7 +38,8 @@ class PushRecord:
     (m, m, rad); tactile: (T, 3) measured (F_x, F_y, contact) in N, world frame, force by the pad
     on the object; rgb: (T, H, W, 3) uint8; depth: (T, H, W) float32 metres; s0: (H, W) bool
     object mask at t_0; outline_mask: (kH, kW) bool object mask at t_0 at the camera's outline
-    resolution (k = `CameraConfig.outline_scale`). Images are None where not recorded.
+    resolution (k = `CameraConfig.outline_scale`); outline_mask_end: the same at the last sample,
+    the object at rest after the push. Images are None where not recorded.
     What only the simulator knows: force_clean: (T, 2) noiseless force (N; None for a real
     push); trace: optional physics-rate record {"time", "pose", "velocity", "force"}.
     A real pusher's track at its recorder's own rate: pusher_fine (N, 3) [t (s, the record's
@@ -60,12 +61,15 @@ class PushRecord:
     trace: dict | None = field(default=None, repr=False)
     outline_mask: np.ndarray | None = None
     pusher_fine: np.ndarray | None = field(default=None, repr=False)
+    outline_mask_end: np.ndarray | None = None
 
     def __eq__(self, other) -> bool:
         """Equal when the push and every recorded array are identical (bitwise)."""
         if not isinstance(other, PushRecord) or self.push != other.push:
             return False
-        names = (*self.TRACKS, "rgb", "depth", "s0", "outline_mask", "pusher_fine")
+        names = (
+            *self.TRACKS, "rgb", "depth", "s0", "outline_mask", "pusher_fine", "outline_mask_end"
+        )  # fmt: skip
         return all(
             (a is None and b is None) or (a is not None and b is not None and np.array_equal(a, b))
             for a, b in ((getattr(self, n), getattr(other, n)) for n in names)
@@ -331,7 +335,7 @@ class PushSimulator:
         contact_share = np.zeros(T)
         pusher = np.zeros((T, 2))
         time = np.arange(T) / rate
-        rgb = depth = s0 = outline = None
+        rgb = depth = s0 = outline = outline_end = None
         if render:
             H, W = cfg.camera.height, cfg.camera.width
             rgb = np.zeros((T, H, W, 3), np.uint8)
@@ -431,6 +435,8 @@ class PushSimulator:
                     if k == 0:
                         s0 = self.renderer.segmentation(data)
                         outline = self.outline_mask()
+                    if k == T - 1:
+                        outline_end = self.outline_mask()
                     rgb[k], depth[k] = self.renderer.rgbd(data)
         finally:
             model.opt.timestep = dt
@@ -441,7 +447,10 @@ class PushSimulator:
         tactile[0, :2] = noise[0]
         if tr is not None:
             tr = {k: np.asarray(v) for k, v in tr.items()}
-        return PushRecord(push, time, pose, tactile, force, pusher, rgb, depth, s0, tr, outline)
+        return PushRecord(
+            push, time, pose, tactile, force, pusher, rgb, depth, s0, tr, outline,
+            outline_mask_end=outline_end,
+        )  # fmt: skip
 
     def close(self) -> None:
         if self._renderer is not None:
