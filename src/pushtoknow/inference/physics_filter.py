@@ -6,7 +6,8 @@ footprint is traced on the first push's mask with its corners kept sharp
 (`perception.footprint.replay_outline`) and fixes the object frame; a later push's start
 pose is VisNet's refined geometrically, the first push's contour registered to the push's
 mask (`perception.registration.register`); each push's pose track is VisNet's from there,
-frame by frame, each frame's reference pose the previous measurement.
+frame by frame, each frame's reference pose the previous measurement, and its end pose, at rest
+after the push, is registered the same way on the outline mask taken then (`end_pose`).
 The parameter belief (a Gaussian over `identification.prior.fit_transform`'s coordinates,
 starting at the prior of the footprint seen, `identification.prior.footprint_prior`) is
 updated after each push by replaying it in the testbed's scene with that footprint
@@ -305,8 +306,9 @@ class PhysicsFilterEstimator(Estimator):
         poses = self.perceive(record, view, pose0)
         seen = dataclasses.replace(record, pose=poses)
         (track,) = tracks_from_records([seen], self.sim_config)
-        if self.filter_config.end_pose_noise is not None:
-            track = dataclasses.replace(track, end_pose=self.end_pose(record, poses[-1]))
+        end = self.end_pose(record, poses[-1])
+        if end is not None and self.filter_config.end_pose_noise is not None:
+            track = dataclasses.replace(track, end_pose=end)
         extra = self._closed_form_start(seen) if not self.updates else []
         cfg = self.filter_config
         up = iterated_update(
