@@ -97,7 +97,7 @@ def test_the_estimator_is_chosen_by_name(model):
 
 def test_the_split_floor_widens_m_and_mu_not_their_product_once_pushes_were_seen(model):
     """`split_floor` adds its variance to log m and log μ at fixed log μ·m, only once a push was
-    seen; the CoM floor adds to the CoM alone."""
+    seen; the CoM floor adds to the CoM alone, the I_z floor to log I_z alone."""
     from pushtoknow.common.params import space_scale
     from pushtoknow.identification.recursive import PhysicsFilterConfig
 
@@ -106,8 +106,9 @@ def test_the_split_floor_widens_m_and_mu_not_their_product_once_pushes_were_seen
         return PhysicsFilterEstimator(model, filter_config=cfg.model_copy(update=floors))
 
     plain, split, com = estimator(), estimator(split_floor=0.3), estimator(com_floor=4e-3)
+    inertia = estimator(inertia_floor=0.3)
     np.testing.assert_allclose(split.estimate(0).belief.cov_norm, plain.estimate(0).belief.cov_norm)
-    for est in (plain, split, com):
+    for est in (plain, split, com, inertia):
         est.updates.append(None)  # a push was seen: the floors apply
     s = space_scale()
     base = plain.estimate(1).belief.cov_norm * np.outer(s, s)  # log / SI units
@@ -118,6 +119,8 @@ def test_the_split_floor_widens_m_and_mu_not_their_product_once_pushes_were_seen
     np.testing.assert_allclose(added[2:, :], 0.0, atol=1e-15)
     added = com.estimate(1).belief.cov_norm * np.outer(s, s) - base
     np.testing.assert_allclose(np.diag(added), [0, 0, 16e-6, 16e-6, 0], atol=1e-15)
+    added = inertia.estimate(1).belief.cov_norm * np.outer(s, s) - base
+    np.testing.assert_allclose(added, np.diag([0, 0, 0, 0, 0.09]), atol=1e-12)
 
 
 def test_a_poor_push_refits_every_push_so_far_and_keeps_the_refit_only_where_it_fits(

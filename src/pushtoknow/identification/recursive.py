@@ -216,7 +216,11 @@ class PhysicsFilterConfig(Config):
         "docs/DESIGN.md §12)",
     )
     inertia_floor: float = Field(
-        0.1, ge=0, description="std of log I_z added to the reported I_z in quadrature"
+        0.3,
+        ge=0,
+        description="std of log I_z added to the reported I_z in quadrature: a spin-down "
+        "replayed on a perceived outline and CoM reads I_z with an error no noise term holds "
+        "(chosen on validation objects, docs/DESIGN.md §12)",
     )
     look_ahead_candidates: int = Field(
         8, ge=1, description="candidates an active policy scores with replays"
