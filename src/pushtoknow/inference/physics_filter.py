@@ -12,8 +12,8 @@ The parameter belief (a Gaussian over `identification.prior.fit_transform`'s coo
 starting at the prior of the footprint seen, `identification.prior.footprint_prior`) is
 updated after each push by replaying it in the testbed's scene with that footprint
 (`identification.recursive.iterated_update`), carried to the next push; with
-`PhysicsFilterConfig.max_refits` > 0 (off by default), a push the replay cannot reproduce from
-the belief refits every push so far from the prior (`identification.recursive.refit`), kept
+up to `PhysicsFilterConfig.max_refits` times per object (2 by default), a push the replay
+cannot reproduce from the belief refits every push so far from the prior (`identification.recursive.refit`), kept
 when it explains them much better. Active policies score
 candidates by the entropy the same update would remove, from replays of the candidates at the
 belief's mean (`identification.recursive.expected_information`).
