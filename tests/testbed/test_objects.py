@@ -239,3 +239,21 @@ def test_novel_objects_are_valid_seeded_and_partly_unseen():
     for o in a:  # continuous parameters, round-trip through JSON like the evaluation does
         assert load_object_spec(o.to_json()).to_dict() == o.to_dict()
         assert o.params.mass not in (0.2, 0.5, 0.8, 1.2)
+
+
+def test_a_file_that_is_not_an_object_spec_is_refused_in_one_short_line(tmp_path):
+    """A text file that parses as YAML but holds no mapping (any text file does) is named with
+    what it holds, and the message never carries the whole file."""
+    path = tmp_path / "notes.txt"
+    path.write_text("a line of notes " * 500, encoding="utf-8")
+    with pytest.raises(ObjectSpecError) as e:
+        load_object_spec(path)
+    message = str(e.value)
+    assert str(path) in message and "holds a str, not a mapping" in message
+    assert "\n" not in message and len(message) < 200 + len(str(path))
+
+
+def test_a_long_value_is_cut_short_in_the_message():
+    with pytest.raises(ObjectSpecError) as e:
+        ObjectSpec.from_dict(["x" * 10_000])
+    assert len(str(e.value)) < 200 and "…" in str(e.value)

@@ -22,12 +22,18 @@ def yaml_error_summary(e: Exception) -> str:
     )
 
 
+VALUE_CHARS = 80  # the longest value an error message shows
+
+
 class ObjectSpecError(PushToKnowError, ValueError):
     """An object description is invalid; the message names the field and the value."""
 
     def __init__(self, field: str, value: object, problem: str):
         self.field, self.value, self.problem = field, value, problem
-        super().__init__(f"invalid object spec: {field}={value!r}: {problem}")
+        shown = repr(value)
+        if len(shown) > VALUE_CHARS:  # a whole file read as one value stays one short line
+            shown = f"{shown[: VALUE_CHARS - 1]}…"
+        super().__init__(f"invalid object spec: {field}={shown}: {problem}")
 
     def __reduce__(self):  # raised in a worker process, re-raised in the parent
         return type(self), (self.field, self.value, self.problem)

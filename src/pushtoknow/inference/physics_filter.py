@@ -11,10 +11,10 @@ after the push, is registered the same way on the outline mask taken then (`end_
 The parameter belief (a Gaussian over `identification.prior.fit_transform`'s coordinates,
 starting at the prior of the footprint seen, `identification.prior.footprint_prior`) is
 updated after each push by replaying it in the testbed's scene with that footprint
-(`identification.recursive.iterated_update`), carried to the next push; with
-up to `PhysicsFilterConfig.max_refits` times per object (2 by default), a push the replay
-cannot reproduce from the belief refits every push so far from the prior (`identification.recursive.refit`), kept
-when it explains them much better. Active policies score
+(`identification.recursive.iterated_update`), carried to the next push; up to
+`PhysicsFilterConfig.max_refits` times per object (2 by default), a push the replay cannot
+reproduce from the belief refits every push so far from the prior
+(`identification.recursive.refit`), kept when it explains them much better. Active policies score
 candidates by the entropy the same update would remove, from replays of the candidates at the
 belief's mean (`identification.recursive.expected_information`).
 """

@@ -43,4 +43,7 @@ def load_object_spec(source: str | Path) -> ObjectSpec:
         raise ObjectSpecError("<file>", s, yaml_error_summary(e)) from None
     except ValueError as e:  # not UTF-8 text
         raise ObjectSpecError("<file>", s, str(e)) from None
+    if not isinstance(data, dict):
+        found = type(data).__name__
+        raise ObjectSpecError("<file>", s, f"not an object spec: holds a {found}, not a mapping")
     return ObjectSpec.from_dict(data)
