@@ -50,6 +50,11 @@ CASES = [
         ["evaluate", "--data", "{tmp}/empty", "--models", "pretrained", "--out", "{tmp}/e"],
         "no shard",
     ),
+    (
+        ["evaluate", "--models", "pretrained,{tmp}/no-run", "--out", "{tmp}/e"],
+        "no-run: no such run folder or checkpoint",
+    ),
+    (["infer", "--object", "{tmp}/taken.txt"], "holds a str, not a mapping"),
     (["evaluate-heldout", "--objects", "2", "--policy", "greedy"], "'--policy'"),
     (["infer", "--object", "catalogue:3", "--model", "{tmp}/taken"], "not a readable pushtoknow"),
     (["infer", "--object", "{tmp}/broken.yaml"], "line 2"),

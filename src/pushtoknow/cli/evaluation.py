@@ -265,7 +265,10 @@ def evaluate_cmd(
     cfg = EvaluationConfig.model_validate(cfg.model_dump())
     refs = [r for m in models for r in m.split(",") if r]
     paths = [resolve_model_path(r) for r in refs]
-    extra = [Path(a).read_text() for a in append]  # read first: fail before hours of work
+    for ref, path in zip(refs, paths):  # checked first: fail before hours of work
+        if not path.exists():
+            fail(ValueError(f"--models {ref}: no such run folder or checkpoint ({path})"))
+    extra = [Path(a).read_text() for a in append]
     from pushtoknow.common.parallel import make_runner
 
     with make_runner(cfg.workers, ray) as runner, Progress(console=err_console) as bar:
