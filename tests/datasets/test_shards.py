@@ -237,3 +237,24 @@ def test_random_objects_for_the_dataset_seed_or_their_own():
     for bad in ("random:", "random:x", "random:-1", "random:1:2"):
         with pytest.raises(ObjectSpecError, match="random:SEED needs"):
             select_objects(bad, 2, 0)
+
+
+def test_sources_joined_by_plus_take_turns():
+    """`A+B+C` takes its objects from each source in turn, each source's objects its own first
+    ones for the seed; the shipped recipe's `catalogue-train+continuous` is the two-source case
+    (its first object the catalogue's, its second a continuous one)."""
+    from pushtoknow.testbed.random_shapes import random_objects
+
+    def dicts(specs):
+        return [s.to_dict() for s in specs]
+
+    got = select_objects("catalogue-train+continuous+random:7", 7, 3)
+    assert dicts(got[0::3]) == dicts(select_objects("catalogue-train", 3, 3))
+    assert dicts(got[1::3]) == dicts(select_objects("continuous", 2, 3))
+    assert dicts(got[2::3]) == dicts(random_objects(2, 7))
+    pair = select_objects("catalogue-train+continuous", 5, 3)
+    assert dicts(pair[0::2]) == dicts(select_objects("catalogue-train", 3, 3))
+    assert dicts(pair[1::2]) == dicts(select_objects("continuous", 2, 3))
+    assert GenerationConfig(objects_from="continuous+random:7").fingerprint()  # not a file
+    with pytest.raises(ObjectSpecError, match="continuous\\+nothing"):
+        select_objects("continuous+nothing", 2, 0)

@@ -35,6 +35,13 @@ from pushtoknow.cli.shared import (
 )
 from pushtoknow.common.errors import PushToKnowError
 
+OBJECTS_FROM_HELP = (
+    "catalogue | catalogue-train | catalogue-test | continuous | novel (the evaluation's novel "
+    "objects: unseen shapes and catalogue shapes alternately, continuous parameters) | "
+    "random[:SEED] (random shapes, continuous parameters; SEED defaults to --seed) | FILE "
+    "(JSON/YAML specs) | SOURCE+SOURCE[+…] (in turn, e.g. catalogue-train+continuous+random)"
+)
+
 
 @app.command()
 def simulate(
@@ -47,11 +54,7 @@ def simulate(
     objects_from: str = typer.Option(
         "catalogue",
         "--objects-from",
-        help="catalogue | catalogue-train | catalogue-test | continuous | "
-        "catalogue-train+continuous (alternately) | novel (the evaluation's novel objects: "
-        "unseen shapes and catalogue shapes alternately, continuous parameters) | "
-        "random[:SEED] (random shapes, continuous parameters; SEED defaults to --seed) | "
-        "FILE (JSON/YAML specs)",
+        help=OBJECTS_FROM_HELP,
     ),
     profiles: str = typer.Option(
         "constant", "--profiles", help="comma-separated speed profiles: constant,release"
@@ -169,8 +172,7 @@ def collect(
     objects_from: str = typer.Option(
         "catalogue-train",
         "--objects-from",
-        help="catalogue | catalogue-train | catalogue-test | continuous | novel | "
-        "random[:SEED] | FILE",
+        help=OBJECTS_FROM_HELP,
     ),
     first_object_index: int = typer.Option(
         0, "--first-object-index", min=0, help="skip this many objects of the seeded order"

@@ -52,8 +52,9 @@ class GenerationConfig(Config):
     seed: int = 0
     objects_from: str = Field(
         "catalogue",
-        description="catalogue | catalogue-train | catalogue-test | continuous | "
-        "catalogue-train+continuous | novel | random[:SEED] | FILE",
+        description="catalogue | catalogue-train | catalogue-test | continuous | novel | "
+        "random[:SEED] | FILE | SOURCE+SOURCE[+…] (those sources in turn, e.g. "
+        "catalogue-train+continuous+random)",
     )
     profiles: tuple[Literal["constant", "release"], ...] = ("constant",)
     objects_per_shard: int = Field(4, gt=0)
@@ -69,13 +70,20 @@ class GenerationConfig(Config):
         return self.sim.push.profile_speed(profile)
 
 
-OBJECT_SOURCES = ("catalogue", "catalogue-train", "catalogue-test", "continuous",
-                  "catalogue-train+continuous", "novel", "random")  # fmt: skip
+OBJECT_SOURCES = ("catalogue", "catalogue-train", "catalogue-test", "continuous", "novel",
+                  "random")  # fmt: skip
+
+
+def _named_source(objects_from: str) -> bool:
+    """Whether `objects_from` names generated objects (a source, random:SEED or several joined
+    by '+'), not a file."""
+    parts = objects_from.split("+")
+    return all(p in OBJECT_SOURCES or p.startswith("random:") for p in parts)
 
 
 def objects_file_sha256(objects_from: str) -> str | None:
     """'sha256:HEX' of the bytes of an `objects_from` that names a file, else None."""
-    if objects_from in OBJECT_SOURCES or objects_from.startswith("random:"):
+    if _named_source(objects_from):
         return None
     path = Path(objects_from)
     return f"sha256:{file_sha256(path)}" if path.is_file() else None
@@ -94,10 +102,11 @@ def select_objects(objects_from: str, n: int, seed: int) -> list[ObjectSpec]:
         return [cat[ids[i]] for i in order[:n]]
     if objects_from == "continuous":
         return [sample_continuous_object(np.random.default_rng([seed, 1, i])) for i in range(n)]
-    if objects_from == "catalogue-train+continuous":  # alternately one of each
-        grid = select_objects("catalogue-train", (n + 1) // 2, seed)
-        cont = select_objects("continuous", n // 2, seed)
-        return [grid[i // 2] if i % 2 == 0 else cont[i // 2] for i in range(n)]
+    if "+" in objects_from and _named_source(objects_from):  # the sources in turn
+        parts = objects_from.split("+")
+        k = len(parts)
+        pools = [select_objects(p, len(range(j, n, k)), seed) for j, p in enumerate(parts)]
+        return [pools[i % k][i // k] for i in range(n)]
     if objects_from == "novel":  # the evaluation's kind of object: unseen shapes among them
         return novel_objects(n, seed)
     if objects_from == "random":  # random shapes (testbed.random_shapes) of the dataset seed
@@ -116,7 +125,8 @@ def select_objects(objects_from: str, n: int, seed: int) -> list[ObjectSpec]:
         raise ObjectSpecError(
             "--objects-from",
             objects_from,
-            "neither 'catalogue', 'continuous', 'novel', 'random[:SEED]' nor an existing file",
+            "neither 'catalogue', 'continuous', 'novel', 'random[:SEED]', sources joined by "
+            "'+' nor an existing file",
         )
     try:
         data = yaml.safe_load(read_utf8(path))
