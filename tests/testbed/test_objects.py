@@ -253,7 +253,11 @@ def test_a_file_that_is_not_an_object_spec_is_refused_in_one_short_line(tmp_path
     assert "\n" not in message and len(message) < 200 + len(str(path))
 
 
-def test_a_long_value_is_cut_short_in_the_message():
+def test_a_long_value_is_cut_short_in_the_message_a_long_path_is_not(tmp_path):
     with pytest.raises(ObjectSpecError) as e:
         ObjectSpec.from_dict(["x" * 10_000])
-    assert len(str(e.value)) < 200 and "…" in str(e.value)
+    assert len(str(e.value)) < 400 and "…" in str(e.value)
+    deep = tmp_path.joinpath(*["a-long-folder-name"] * 8, "spec.yaml")
+    with pytest.raises(ObjectSpecError) as e:
+        load_object_spec(deep)
+    assert str(deep) in str(e.value)

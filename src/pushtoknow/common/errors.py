@@ -22,7 +22,7 @@ def yaml_error_summary(e: Exception) -> str:
     )
 
 
-VALUE_CHARS = 80  # the longest value an error message shows
+VALUE_CHARS = 300  # the longest value an error message shows (a file path fits whole)
 
 
 class ObjectSpecError(PushToKnowError, ValueError):
@@ -31,7 +31,7 @@ class ObjectSpecError(PushToKnowError, ValueError):
     def __init__(self, field: str, value: object, problem: str):
         self.field, self.value, self.problem = field, value, problem
         shown = repr(value)
-        if len(shown) > VALUE_CHARS:  # a whole file read as one value stays one short line
+        if len(shown) > VALUE_CHARS:  # a whole file read as one value stays one line
             shown = f"{shown[: VALUE_CHARS - 1]}…"
         super().__init__(f"invalid object spec: {field}={shown}: {problem}")
 
