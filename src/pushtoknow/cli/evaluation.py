@@ -265,8 +265,10 @@ def evaluate_cmd(
     cfg = EvaluationConfig.model_validate(cfg.model_dump())
     refs = [r for m in models for r in m.split(",") if r]
     paths = [resolve_model_path(r) for r in refs]
+    from pushtoknow.models.checkpoint import checkpoint_file
+
     for ref, path in zip(refs, paths):  # checked first: fail before hours of work
-        if not path.exists():
+        if not checkpoint_file(path).exists():
             fail(ValueError(f"--models {ref}: no such run folder or checkpoint ({path})"))
     extra = [Path(a).read_text() for a in append]
     from pushtoknow.common.parallel import make_runner

@@ -303,12 +303,16 @@ def save_checkpoint(model: TrainedModel, path: Path) -> Path:
     return path
 
 
+def checkpoint_file(path: Path) -> Path:
+    """The checkpoint file `path` names: itself, or a run directory's `model.pt`."""
+    path = Path(path)
+    return path / CHECKPOINT_FILE if path.is_dir() else path
+
+
 def load_checkpoint(path: Path) -> TrainedModel:
     """Read a checkpoint written by `save_checkpoint` (a file, or a run directory holding
     `model.pt`)."""
-    path = Path(path)
-    if path.is_dir():
-        path = path / CHECKPOINT_FILE
+    path = checkpoint_file(path)
     if not path.exists():
         raise CheckpointError(f"no checkpoint at {path}")
     try:
