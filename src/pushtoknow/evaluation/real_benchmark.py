@@ -513,7 +513,7 @@ def _learned(model, obj: RealObject, seed: int):
     est = LearnedFilterEstimator(model, cfg, seed)
     res = infer_recorded(model, recs, cfg, seed, None, obj.key, estimator=est)
     footprint = None if obj.shape is None else footprint_from_shape(obj.shape)
-    reasons = outside_training(obj.records, footprint, obj.sim_config)
+    reasons = outside_training(obj.records, footprint, obj.sim_config, model.info)
     return res.prior, res.estimates[-1], {"outside_training": list(reasons)} if reasons else {}
 
 

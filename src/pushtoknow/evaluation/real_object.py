@@ -768,7 +768,7 @@ def _notes(truth, pushes, model, real: RealPushes, cautions: list[str]) -> list[
     )
     from pushtoknow.inference.learned_filter import outside_training  # torch: the filter's
 
-    reasons = outside_training(real.records, real.spec.footprint, real.sim_config)
+    reasons = outside_training(real.records, real.spec.footprint, real.sim_config, model.info)
     notes.append(
         "the filter: this object lies outside what it was trained on (read off its pushes and "
         f"outline): {'; '.join(reasons)}; its estimates there are extrapolations"

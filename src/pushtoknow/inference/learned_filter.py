@@ -17,15 +17,16 @@ Per push k:
 
 from __future__ import annotations
 
+import functools
 from collections import Counter
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 import torch
 
 from pushtoknow.active.information_policy import ActivePolicy
 from pushtoknow.active.selection import ScoreName
-from pushtoknow.common.errors import DatasetError
+from pushtoknow.common.errors import DatasetError, PushToKnowError
 from pushtoknow.common.estimate import com_region
 from pushtoknow.common.params import PARAM_RANGES
 from pushtoknow.inference.estimator import (
@@ -236,13 +237,53 @@ class LearnedFilterEstimator(Estimator):
 TRAINING_MARGIN = 0.1  # relative: a reading this far beyond the training range lies outside it
 
 
+@functools.lru_cache(maxsize=4)
+def _dataset_footprint_bounds(
+    objects_from: str, objects: int, seed: int
+) -> tuple[tuple[float, float], tuple[float, float]]:
+    """((lo, hi) largest radius from the object frame's origin (m), (lo, hi) area (m²)) over a
+    dataset's objects (`datasets.generate.select_objects`)."""
+    from pushtoknow.datasets.generate import select_objects
+
+    shapes = [s.footprint for s in select_objects(objects_from, objects, seed)]
+    return _bounds(shapes)
+
+
+def _bounds(shapes: Sequence[Footprint]) -> tuple[tuple[float, float], tuple[float, float]]:
+    radius = [s.max_radius_from((0.0, 0.0)) for s in shapes]
+    area = [s.polygon.area for s in shapes]
+    return (min(radius), max(radius)), (min(area), max(area))
+
+
+def training_footprint_bounds(
+    info: Mapping | None,
+) -> tuple[tuple[float, float], tuple[float, float]]:
+    """((lo, hi) largest radius from the object frame's origin (m), (lo, hi) area (m²)) of the
+    footprints a model was trained on: its dataset's objects, regenerated from the provenance
+    its checkpoint records (`TrainedModel.info`: objects_from, objects, data_seed); the
+    catalogue's shapes (`testbed.objects.CATALOGUE_SHAPES`) where that provenance is missing
+    or names objects that cannot be regenerated (a file since moved)."""
+    info = info or {}
+    source, n, seed = info.get("objects_from"), info.get("objects"), info.get("data_seed")
+    if isinstance(source, str) and isinstance(n, int) and isinstance(seed, int):
+        try:
+            return _dataset_footprint_bounds(source, n, seed)
+        except (PushToKnowError, OSError, ValueError):
+            pass
+    return _bounds([footprint_from_shape(s) for s in CATALOGUE_SHAPES.values()])
+
+
 def outside_training(
-    records: Sequence[PushRecord], footprint: Footprint | None, sim_config: SimConfig
+    records: Sequence[PushRecord],
+    footprint: Footprint | None,
+    sim_config: SimConfig,
+    training: Mapping | None = None,
 ) -> tuple[str, ...]:
-    """Why an object lies outside what the learned filter was trained on (the testbed
-    catalogue's shapes, `testbed.objects.CATALOGUE_SHAPES`, and parameter ranges,
-    `common.params.PARAM_RANGES`), read off the object and its pushes without its truth; empty
-    where nothing shows it. Each reason is one sentence:
+    """Why an object lies outside what the learned filter was trained on (its training
+    objects' footprints, `training_footprint_bounds` of `training`, the checkpoint's
+    `TrainedModel.info`, and the parameter ranges, `common.params.PARAM_RANGES`), read off the
+    object and its pushes without its truth; empty where nothing shows it. Each reason is one
+    sentence:
     - μ·m from the steady force of a constant push (`identification.fit.closed_form_start`; at
       most μ·m on an off-centre push) above the largest training μ·m, or below half the least;
     - m or μ read off a release push outside their training ranges;
@@ -273,13 +314,11 @@ def outside_training(
                 f"{lo:g}–{hi:g}{unit}"
             )
     if footprint is not None:
-        shapes = [footprint_from_shape(s) for s in CATALOGUE_SHAPES.values()]
-        for what, value, known, unit, scale in (
-            ("largest radius", footprint.max_radius_from((0.0, 0.0)),
-             [s.max_radius_from((0.0, 0.0)) for s in shapes], "cm", 100.0),
-            ("area", footprint.polygon.area, [s.polygon.area for s in shapes], "cm²", 1e4),
-        ):  # fmt: skip
-            lo, hi = min(known), max(known)
+        radius, area = training_footprint_bounds(training)
+        for what, value, (lo, hi), unit, scale in (
+            ("largest radius", footprint.max_radius_from((0.0, 0.0)), radius, "cm", 100.0),
+            ("area", footprint.polygon.area, area, "cm²", 1e4),
+        ):
             if not lo * shrink <= value <= hi * grow:
                 reasons.append(
                     f"its footprint's {what} {value * scale:.3g} {unit} is outside the training "
