@@ -261,3 +261,41 @@ def test_choose_weights_never_exceeds_the_lowest_nlls_weight(w, n, tolerance, se
     assert (lowest <= bound + 1e-6).all()
     if tolerance == 0.0:
         torch.testing.assert_close(lowest, nll.mean(1).min(0).values)
+
+
+def test_a_setting_the_filter_cannot_run_with_is_never_chosen(tmp_path_factory, monkeypatch):
+    """A candidate dynamic R scale under which the filter's belief stops being a covariance
+    (`CovarianceError` on some validation sequence) scores an infinite NLL, is logged as failed
+    and loses to the settings that run; the calibration does not stop."""
+    from pushtoknow.filters.gaussian import CovarianceError
+    from pushtoknow.models.checkpoint import load_checkpoint
+    from pushtoknow.training import calibrate
+    from pushtoknow.training.calibrate import SequenceCalibrationConfig, calibrate_evidence
+
+    model = load_checkpoint(tiny_run(tmp_path_factory)).eval()
+    pt = load_push_tensors(tiny_dataset(tmp_path_factory))
+    cfg = SequenceCalibrationConfig(
+        weights=(0.0, 1.0), dynamic_noise_scales=(0.25,), num_sigma_points=SIGMA_POINTS
+    )
+    run = calibrate.run_sequences
+
+    def breaks_at_small_scale(model, pt, seqs, weights, settings, *args, **kwargs):
+        if settings.dynamic_noise_scale == 0.25:
+            raise CovarianceError("belief covariance is not positive definite at batch index [1]")
+        return run(model, pt, seqs, weights, settings, *args, **kwargs)
+
+    monkeypatch.setattr(calibrate, "run_sequences", breaks_at_small_scale)
+    rows: list[dict] = []
+    with torch.no_grad():
+        chosen = calibrate_evidence(model, pt, cfg, seed=0, log=rows.append)
+    failed = [r for r in rows if r.get("failed")]
+    assert len(failed) == 2 and all(r["dynamic_noise_scale"] == 0.25 for r in failed)
+    assert all(math.isinf(r["nll_log_mu_m"]) for r in failed)
+    assert chosen.dynamic_noise_scale != 0.25
+
+    def always_breaks(*args, **kwargs):
+        raise CovarianceError("belief covariance is not positive definite at batch index [0]")
+
+    monkeypatch.setattr(calibrate, "run_sequences", always_breaks)
+    with pytest.raises(ValueError, match="no setting"), torch.no_grad():
+        calibrate_evidence(model, pt, cfg, seed=0)  # nothing runs: said, not a wrong choice

@@ -22,7 +22,9 @@ standard error over the objects of its paired difference to the lowest) ties wit
 smallest tied weight is chosen (the one-standard-error rule): a direction keeps evidence only
 where the validation objects show that it pays, so a parameter the pushes barely reveal keeps
 its prior's width. The choice is made on validation objects only (never on the evaluation's
-held-out ones).
+held-out ones). A setting under which the filter's belief stops being a covariance on a
+validation sequence (`filters.gaussian.CovarianceError`) scores an infinite NLL there, so it is
+never chosen; its row of the log says why.
 """
 
 from __future__ import annotations
@@ -34,6 +36,7 @@ from pydantic import Field, field_validator, model_validator
 
 from pushtoknow.common.frozen_config import Config
 from pushtoknow.common.params import MIN_SIGMA_POINTS
+from pushtoknow.filters.gaussian import CovarianceError
 from pushtoknow.filters.tensor_shapes import expect_shape
 from pushtoknow.models.calibration import (
     DIRECTIONS,
@@ -240,9 +243,15 @@ def calibrate_evidence(
         for w in cfg.weights:
             trial = table.clone()
             trial[rows] = float(w)
-            beliefs = run_sequences(model, val, seqs, trial, settings, cfg, seed, corr)
-            per_push = torch.stack([direction_nll(m, c, truth) for m, c in beliefs])
-            nll.append(per_push.mean(0))  # (N, K): each object's mean over its pushes
+            failure = ""
+            try:
+                beliefs = run_sequences(model, val, seqs, trial, settings, cfg, seed, corr)
+                per_push = torch.stack([direction_nll(m, c, truth) for m, c in beliefs])
+                nll.append(per_push.mean(0))  # (N, K): each object's mean over its pushes
+            except CovarianceError as e:  # the filter breaks down under these settings: a
+                # setting it cannot run with is never chosen (its NLL is infinite)
+                failure = str(e)
+                nll.append(torch.full((seqs.shape[0], len(DIRECTIONS)), math.inf))
             if log:
                 log(
                     {
@@ -257,6 +266,7 @@ def calibrate_evidence(
                         f"nll_{d}": float(v)
                         for d, v in zip(DIRECTIONS, nll[-1].mean(0), strict=True)
                     }
+                    | ({"failed": failure} if failure else {})
                 )
             if progress:
                 progress.advance(task)
