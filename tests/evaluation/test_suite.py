@@ -83,6 +83,13 @@ def test_method_names_mark_a_structure_other_than_the_first_models():
         "vt-addf-physics",
     ]
     assert _variant_names(loaded[:1] * 2) == ["vt-addf", "vt-addf#1"]
+    # a repeated name takes its run folder's where given and free
+    runs = ["pretrained", "runs/vt-addf-random-shapes/model.pt", "runs/vt-addf-random-shapes"]
+    assert _variant_names(loaded[:1] * 3, runs) == [
+        "vt-addf",
+        "vt-addf-random-shapes",
+        "vt-addf#2",
+    ]
 
 
 def test_config_rejects_unknown_keys(tmp_path):

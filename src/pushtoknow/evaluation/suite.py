@@ -57,6 +57,7 @@ import json
 import os
 import platform
 import shutil
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
@@ -487,15 +488,20 @@ def _forest_run(forest: ForestBaseline, features: np.ndarray, base: HeldoutRun, 
     return gaussian_run(np.stack(means), np.stack(stds), base.truth, base.ids)
 
 
-def _variant_names(loaded: list) -> list[str]:
+def _variant_names(loaded: list, paths: Sequence[str | Path] | None = None) -> list[str]:
     """Method-name prefixes of the models: the variant, suffixed by the model structure
-    (`LearnedModelsConfig.label`) when it differs from the first model's ("vt-addf-black-box"),
-    and by its position when repeated."""
+    (`LearnedModelsConfig.label`) when it differs from the first model's ("vt-addf-black-box");
+    a name already taken becomes its run folder's (`paths`, the models as given; a model.pt's
+    folder) when that is free, else the name suffixed by its position ("vt-addf#1")."""
     first = loaded[0].models_config.label
     names: list[str] = []
-    for m in loaded:
+    for i, m in enumerate(loaded):
         structure = m.models_config.label
         v = m.variant if structure == first else f"{m.variant}-{structure}"
+        if v in names and paths is not None:
+            path = Path(paths[i])
+            folder = (path.parent if path.suffix == ".pt" else path).name
+            v = folder if folder and folder not in names else v
         names.append(v if v not in names else f"{v}#{len(names)}")
     return names
 
@@ -657,7 +663,7 @@ def run_evaluation(
     out.mkdir(parents=True, exist_ok=True)
     workers: Workers = runner if runner is not None else cfg.workers
     loaded = [load_checkpoint(m) for m in models]  # CheckpointError before any work
-    names = _variant_names(loaded)
+    names = _variant_names(loaded, models)
 
     forest = prior = None
     data_info = None if kept is None else kept.get("data")
