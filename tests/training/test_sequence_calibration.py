@@ -265,8 +265,9 @@ def test_choose_weights_never_exceeds_the_lowest_nlls_weight(w, n, tolerance, se
 
 def test_a_setting_the_filter_cannot_run_with_is_never_chosen(tmp_path_factory, monkeypatch):
     """A candidate dynamic R scale under which the filter's belief stops being a covariance
-    (`CovarianceError` on some validation sequence) scores an infinite NLL, is logged as failed
-    and loses to the settings that run; the calibration does not stop."""
+    (`CovarianceError`) on a validation sequence under one weight is dropped whole, though its
+    other weight would score best by far: the weights chosen are never run together. The failed
+    trial is logged with an infinite NLL and its reason; the calibration does not stop."""
     from pushtoknow.filters.gaussian import CovarianceError
     from pushtoknow.models.checkpoint import load_checkpoint
     from pushtoknow.training import calibrate
@@ -279,18 +280,25 @@ def test_a_setting_the_filter_cannot_run_with_is_never_chosen(tmp_path_factory, 
     )
     run = calibrate.run_sequences
 
-    def breaks_at_small_scale(model, pt, seqs, weights, settings, *args, **kwargs):
-        if settings.dynamic_noise_scale == 0.25:
+    def breaks_without_evidence(model, pt, seqs, weights, settings, *args, **kwargs):
+        if settings.dynamic_noise_scale != 0.25:
+            return run(model, pt, seqs, weights, settings, *args, **kwargs)
+        if not bool(weights.any()):
             raise CovarianceError("belief covariance is not positive definite at batch index [1]")
-        return run(model, pt, seqs, weights, settings, *args, **kwargs)
+        truth = pt.params_norm[seqs[:, 0]].float()  # the truth, sure of it: the lowest NLL
+        return [(truth, 1e-4 * torch.eye(5).expand(len(truth), 5, 5))] * seqs.shape[1]
 
-    monkeypatch.setattr(calibrate, "run_sequences", breaks_at_small_scale)
+    monkeypatch.setattr(calibrate, "run_sequences", breaks_without_evidence)
     rows: list[dict] = []
     with torch.no_grad():
         chosen = calibrate_evidence(model, pt, cfg, seed=0, log=rows.append)
     failed = [r for r in rows if r.get("failed")]
-    assert len(failed) == 2 and all(r["dynamic_noise_scale"] == 0.25 for r in failed)
-    assert all(math.isinf(r["nll_log_mu_m"]) for r in failed)
+    assert len(failed) == 1 and failed[0]["dynamic_noise_scale"] == 0.25
+    assert failed[0]["weight"] == 0.0 and math.isinf(failed[0]["nll_log_mu_m"])
+    sure = next(r for r in rows if r["dynamic_noise_scale"] == 0.25 and r["weight"] == 1.0)
+    assert all(
+        sure[f"nll_{d}"] < min(r[f"nll_{d}"] for r in rows if r is not sure) for d in DIRECTIONS
+    )
     assert chosen.dynamic_noise_scale != 0.25
 
     def always_breaks(*args, **kwargs):

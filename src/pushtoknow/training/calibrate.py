@@ -22,9 +22,10 @@ standard error over the objects of its paired difference to the lowest) ties wit
 smallest tied weight is chosen (the one-standard-error rule): a direction keeps evidence only
 where the validation objects show that it pays, so a parameter the pushes barely reveal keeps
 its prior's width. The choice is made on validation objects only (never on the evaluation's
-held-out ones). A setting under which the filter's belief stops being a covariance on a
-validation sequence (`filters.gaussian.CovarianceError`) scores an infinite NLL there, so it is
-never chosen; its row of the log says why.
+held-out ones). A trial under which the filter's belief stops being a covariance on a
+validation sequence (`filters.gaussian.CovarianceError`) scores an infinite NLL, so its weight is
+never chosen, and a candidate R scale with such a trial is dropped whole (the weights chosen are
+never run together); its row of the log says why.
 """
 
 from __future__ import annotations
@@ -251,6 +252,7 @@ def calibrate_evidence(
             except CovarianceError as e:  # the filter breaks down under these settings: a
                 # setting it cannot run with is never chosen (its NLL is infinite)
                 failure = str(e)
+                failures.append(settings)
                 nll.append(torch.full((seqs.shape[0], len(DIRECTIONS)), math.inf))
             if log:
                 log(
@@ -279,8 +281,11 @@ def calibrate_evidence(
     blank = torch.zeros(len(PROFILES), len(DIRECTIONS), dtype=grid.dtype)
     independent = torch.zeros(len(DIRECTIONS), dtype=grid.dtype)
     best_total, best, best_lowest = math.inf, model.inference, None
+    failures: list[InferenceSettings] = []  # the settings of every trial that broke down
     for settings in candidates:
         lowest, index = scan(settings, blank, every, "all", independent)
+        if settings in failures:  # a candidate R scale that broke down under one weight may
+            continue  # under the weights combined: never chosen
         if float(lowest.sum()) < best_total:
             best_total, best_lowest = float(lowest.sum()), lowest
             best = settings.model_copy(
