@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
 # Train the comparison models on the shipped model's data (recipe of scripts/train-pretrained.sh:
-# 1000 catalogue-train + continuous objects × 4 constant or release pushes, data seed 3; one
-# model's own data below), all with the shipped model's VisNet, so they differ from it only in the
-# model structure, the filter or the training objects:
+# 1000 catalogue-train + continuous objects × 4 constant or release pushes, data seed 3), all but
+# the last with the shipped model's VisNet, so they differ from it only in the model structure and
+# the filter:
 #   vt-addf-black-box, vt-jdf-black-box, v-ddf-black-box: the paper's black-box VT-ADDF, VT-JDF
 #       and V-DDF (configs/variants.yaml: the shipped recipe without its end-to-end stage);
 #   vt-addf-pressure-arm: the shipped recipe with the limit surface's moment arm that of the
@@ -14,10 +14,10 @@
 #       after a release);
 #   vt-addf-physics-network: the one before that (configs/vt-addf-physics-network.yaml: quasi-static
 #       motion learned by a network);
-#   vt-addf-random-shapes: the shipped recipe (configs/pretrained-vt-addf.yaml) on training objects
-#       that are random shapes too (WORKDIR/data-random-shapes: 1000 objects of
+#   vt-addf-random-shapes: the shipped recipe whole (configs/pretrained-vt-addf.yaml, its own VisNet)
+#       on training objects that are random shapes too (WORKDIR/data-random-shapes: 1000 objects of
 #       catalogue-train+continuous+random in turn, seed 3, whose random shapes are those of seed 3,
-#       used nowhere else; ~10 min to simulate, ~28 min to train).
+#       used nowhere else; its training took 33 min).
 # ~8 min each on 2 cores unless said; a finished run is skipped.
 # Usage: bash scripts/train-variants.sh [WORKDIR [NAME ...]]  (default: runs/pretrained, all eight)
 set -euo pipefail
@@ -47,8 +47,10 @@ for name in "${NAMES[@]}"; do
                 --profiles constant,release ;;
         *) echo "unknown comparison model: $name" >&2; exit 2 ;;
     esac
+    perception=(--visnet-from src/pushtoknow/pretrained/vt-addf)
+    if [ "$name" = vt-addf-random-shapes ]; then perception=(); fi
     if [ ! -f "$WORK/$name/model.pt" ]; then
         .venv/bin/pushtoknow train --data "$data" --out "$WORK/$name" --variant "$variant" \
-            --config "$config" --seed 0 --visnet-from src/pushtoknow/pretrained/vt-addf
+            --config "$config" --seed 0 "${perception[@]}"
     fi
 done

@@ -240,8 +240,9 @@ def render_report(results: dict, command: str, appendices: list[str] = ()) -> st
     out += [
         "",
         "Protocol (see `pushtoknow.evaluation.suite`): NRMSE = RMSE / catalogue range, mean ± "
-        "std over folds of the evaluation objects (the learned models are trained once, on the "
-        "catalogue's training split, so the spread is over objects, not training runs); "
+        "std over folds of the evaluation objects (each learned model is trained once, on the "
+        "objects listed above, none of them an evaluation object, so the spread is over "
+        "objects, not training runs); "
         "coverage = share of (object, parameter) pairs inside the method's equal-tailed interval "
         "(the filter's is Gaussian in its normalised, log-space parameters, so asymmetric in SI; "
         "the forest's and the prior's are Gaussian in SI); impossible = estimates (objects × "
