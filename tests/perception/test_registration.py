@@ -10,6 +10,7 @@ from shapely.geometry import Point
 from helpers import rasterise_footprint
 from pushtoknow.common.angles import wrap_angle
 from pushtoknow.common.camera import CameraModel
+from pushtoknow.perception import registration
 from pushtoknow.perception.footprint import replay_contour, resample
 from pushtoknow.perception.registration import _normals, fixes_rotation, outline_points, register
 
@@ -101,3 +102,20 @@ def test_rotation_is_fixed_by_an_ellipse_and_a_hexagon_not_a_disc():
     six = np.arange(6) * math.pi / 3
     hexagon = 0.06 * np.stack([np.cos(six), np.sin(six)], 1)
     assert fixes(hexagon)
+
+
+@pytest.mark.parametrize(
+    "outline, offset",
+    [(KITE, (0.003, -0.002, 0.1)), (KITE, (0.0, 0.0, 2.5)), (SQUARE, (0.002, 0.0, 1.4))],
+)
+def test_starts_abandoned_as_hopeless_leave_the_registration_as_it_was(
+    outline, offset, monkeypatch
+):
+    """Starts whose fit stays far worse than the guess's stop early (`ABANDON`): the pose is
+    the one every start run to the end gives, near or far guess, symmetric outline or not."""
+    pose = np.array([0.02, -0.01, 0.8])
+    points, contour = template(outline, POSE0), contour_of(outline, pose)
+    early = register(points, contour, pose + offset)
+    monkeypatch.setattr(registration, "ABANDON", (math.inf, math.inf))
+    full = register(points, contour, pose + offset)
+    np.testing.assert_array_equal(early.pose, full.pose)

@@ -38,6 +38,10 @@ SYMMETRY_RMS = 5e-4
 STARTS = 12  # rotations tried, evenly over the circle from the guess's
 TIE = (1.2, 1e-4)  # fits with RMS ≤ TIE[0] × the best's + TIE[1] (m) fit the outline alike
 ITERATIONS = 50
+# a fit from one of the STARTS still this many times the guess's fit's RMS, plus the margin (m),
+# after ABANDON_AFTER iterations cannot tie with it: it stops there (they crawl, Huber-weighted)
+ABANDON_AFTER = 10
+ABANDON = (5.0, 1e-3)
 STEP_TOLERANCE = 1e-7  # m (and rad·m): the iteration stops when the step is below this
 
 
@@ -67,12 +71,13 @@ def register(points: np.ndarray, contour: Contour, guess: np.ndarray) -> Registr
     guess = np.asarray(guess, dtype=np.float64)
     if not fixes_rotation(points, normals):
         return _fit(points, target, normals, tree, guess, guess, rotation=False)
+    fused = _fit(points, target, normals, tree, guess, guess)
+    hopeless = ABANDON[0] * fused.rms + ABANDON[1]
     fits = []
     for j in range(STARTS):
         start = guess + np.array([0.0, 0.0, 2.0 * math.pi * j / STARTS])
-        fits.append(_fit(points, target, normals, tree, start, None))
+        fits.append(_fit(points, target, normals, tree, start, None, abandon=hopeless))
     tie = TIE[0] * min(f.rms for f in fits) + TIE[1]
-    fused = _fit(points, target, normals, tree, guess, guess)
     if fused.rms <= tie:  # the guess lies in a best fit's basin
         return fused
     alike = [f for f in fits if f.rms <= tie]  # else the guess is wrong: the outline decides
@@ -111,22 +116,33 @@ def _place(points: np.ndarray, pose: np.ndarray) -> np.ndarray:
 
 
 def _fit(
-    points, target, normals, tree, start: np.ndarray, anchor, rotation: bool = True
+    points,
+    target,
+    normals,
+    tree,
+    start: np.ndarray,
+    anchor,
+    rotation: bool = True,
+    abandon: float = np.inf,
 ) -> Registration:
     """Point-to-line ICP (Gauss–Newton, Levenberg-damped, Huber-weighted) of points (N, 2)
     with their normals (N, 2) onto the target contour's points (M, 2) from `start` (3,): the
     outline's own normals, so a rotation it does not fix is not fitted to the target's pixel
     staircase (fixed in the world, not the object). With `anchor` (3,), the guess fused in
-    with GUESS_STD; without `rotation`, the rotation stays the start's."""
+    with GUESS_STD; without `rotation`, the rotation stays the start's. A fit whose
+    point-to-line RMS (a lower bound of the returned RMS) still exceeds `abandon` (m) after
+    `ABANDON_AFTER` iterations stops there."""
     pose = start.copy()
     weight = 1.0 / CONTOUR_NOISE**2
     prior = np.zeros(3) if anchor is None else 1.0 / GUESS_STD**2
-    for _ in range(ITERATIONS):
+    for iteration in range(ITERATIONS):
         world = _place(points, pose)
         arm = world - pose[:2]  # R(θ) q
         _, idx = tree.query(world)
         n = _place(normals, np.array([0.0, 0.0, pose[2]]))  # R(θ) n
         r = np.einsum("ij,ij->i", n, world - target[idx])
+        if iteration >= ABANDON_AFTER and np.sqrt(np.mean(r**2)) > abandon:
+            break
         jac = np.stack([n[:, 0], n[:, 1], n[:, 1] * arm[:, 0] - n[:, 0] * arm[:, 1]], 1)
         w = weight * np.minimum(1.0, HUBER / np.maximum(np.abs(r), 1e-12))
         info = jac.T @ (jac * w[:, None]) + np.diag(prior)

@@ -4,9 +4,11 @@ and the overhead camera."""
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
-from shapely.geometry import MultiPoint, Point, Polygon, box
+import shapely
+from shapely.geometry import Polygon, box
 
 from pushtoknow.common.params import GRAVITY
 from pushtoknow.testbed.objects import ObjectSpec
@@ -34,27 +36,42 @@ def support_points(footprint: Footprint, spacing: float, margin: float, com=None
     footprint less `margin`, except that the ring may cut a sharp corner; if `com` (2,) lies
     outside the hull, the shrunk outline's vertices are added too, so any CoM inside the
     footprint less `margin` can be carried with positive loads."""
-    poly = footprint.polygon.buffer(-margin)
+    pts, hull, corners = _support_grid(
+        footprint.polygon.wkb, len(footprint.vertices), spacing, margin
+    )
+    if com is not None and not shapely.contains_xy(hull, float(com[0]), float(com[1])):
+        pts = np.vstack([pts, corners])
+    return pts.copy()
+
+
+@lru_cache(maxsize=64)
+def _support_grid(
+    outline_wkb: bytes, n_vertices: int, spacing: float, margin: float
+) -> tuple[np.ndarray, Polygon, np.ndarray]:
+    """`support_points`' grid and ring (N, 2) of the footprint polygon (its WKB, V vertices),
+    their convex hull (grown by 1e-9 m) and the shrunk outline's vertices (K, 2)."""
+    outline = shapely.from_wkb(outline_wkb)
+    poly = outline.buffer(-margin)
     if poly.is_empty or poly.area <= 0:
-        poly = footprint.polygon.buffer(-0.25 * footprint.polygon.length / len(footprint.vertices))
-    minx, miny, maxx, maxy = footprint.polygon.bounds
+        poly = outline.buffer(-0.25 * outline.length / n_vertices)
+    minx, miny, maxx, maxy = outline.bounds
     nx = int(np.ceil(max(abs(minx), abs(maxx)) / spacing))
     ny = int(np.ceil(max(abs(miny), abs(maxy)) / spacing))
-    xs = np.arange(-nx, nx + 1) * spacing
-    ys = np.arange(-ny, ny + 1) * spacing
-    inner = poly.buffer(-0.5 * spacing)
-    grid = [(x, y) for x in xs for y in ys if inner.contains(Point(x, y))]
+    xs, ys = np.meshgrid(np.arange(-nx, nx + 1) * spacing, np.arange(-ny, ny + 1) * spacing)
+    xs, ys = xs.T.ravel(), ys.T.ravel()  # x-major, as the grid is listed
+    inside = shapely.contains_xy(poly.buffer(-0.5 * spacing), xs, ys)
+    grid = np.column_stack([xs[inside], ys[inside]])
     if poly.geom_type != "Polygon":  # a thin neck split the shrunk footprint: keep the largest
         poly = max(poly.geoms, key=lambda g: g.area)
     ring = poly.exterior
     n_ring = max(3, int(np.ceil(ring.length / spacing)))
-    edge = [ring.interpolate(t, normalized=True).coords[0] for t in np.arange(n_ring) / n_ring]
-    pts = np.array(grid + edge, dtype=np.float64).reshape(-1, 2)
-    if com is not None and not MultiPoint([tuple(p) for p in pts]).convex_hull.buffer(
-        1e-9
-    ).contains(Point(*com)):
-        pts = np.vstack([pts, np.asarray(ring.coords[:-1], dtype=np.float64)])
-    return pts
+    edge = shapely.get_coordinates(ring.interpolate(np.arange(n_ring) / n_ring, normalized=True))
+    pts = np.vstack([grid, edge]).astype(np.float64).reshape(-1, 2)
+    hull = shapely.multipoints(pts).convex_hull.buffer(1e-9)
+    shapely.prepare(hull)
+    pts.setflags(write=False)
+    corners = np.asarray(ring.coords[:-1], dtype=np.float64)
+    return pts, hull, corners
 
 
 def support_loads(points: np.ndarray, com) -> np.ndarray:
