@@ -36,19 +36,19 @@ fi
     --workers 2 --objects-from catalogue-train+continuous --profiles constant,release
 for name in "${NAMES[@]}"; do
     data="$WORK/data"
+    perception=(--visnet-from src/pushtoknow/pretrained/vt-addf)
     case "$name" in
         *-black-box) variant="${name%-black-box}"; config=configs/variants.yaml ;;
         vt-addf-pressure-arm | vt-addf-free-slide | vt-addf-limit-surface | vt-addf-physics-network)
             variant=vt-addf; config="configs/$name.yaml" ;;
         vt-addf-random-shapes)
             variant=vt-addf; config=configs/pretrained-vt-addf.yaml; data="$WORK/data-random-shapes"
+            perception=()  # its own VisNet
             .venv/bin/pushtoknow simulate --out "$data" --objects 1000 --pushes 4 --seed 3 \
                 --workers 2 --objects-from catalogue-train+continuous+random \
                 --profiles constant,release ;;
         *) echo "unknown comparison model: $name" >&2; exit 2 ;;
     esac
-    perception=(--visnet-from src/pushtoknow/pretrained/vt-addf)
-    if [ "$name" = vt-addf-random-shapes ]; then perception=(); fi
     if [ ! -f "$WORK/$name/model.pt" ]; then
         .venv/bin/pushtoknow train --data "$data" --out "$WORK/$name" --variant "$variant" \
             --config "$config" --seed 0 "${perception[@]}"
