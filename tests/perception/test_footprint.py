@@ -12,11 +12,15 @@ from pushtoknow.common.camera import CameraModel
 from pushtoknow.common.errors import ShapeError
 from pushtoknow.geometry.affordances import mask_contour
 from pushtoknow.perception.footprint import (
+    FUSION_SMOOTHING,
     decimate,
     footprint_from_mask,
     footprint_seen,
+    fused_contour,
     object_top,
+    outline_contour,
     resample,
+    to_object_frame,
 )
 from pushtoknow.testbed.executor import SimulatedExecutor
 from pushtoknow.testbed.objects import novel_objects
@@ -134,3 +138,55 @@ def test_decimation_keeps_order_and_a_subset(n, seed):
     idx = [int(np.flatnonzero((pts == p).all(1))[0]) for p in out]
     k = int(np.argmin(idx))
     assert idx[k:] + idx[:k] == sorted(idx)
+
+
+# a pentagon with a 40° tip, 12 × 9 cm, its centroid near the origin (object frame, m)
+PENTAGON = np.array([[-0.05, -0.04], [0.06, -0.035], [0.07, 0.0], [-0.01, 0.05], [-0.06, 0.01]])
+OUTLINE_CAMERA = CameraModel(64, 64, 45.0, (0.0, 0.0, 0.75)).scaled(4)
+
+
+def _boundary_error(contour: np.ndarray, truth: np.ndarray) -> float:
+    """Mean distance (m) between two outlines: their symmetric difference over the perimeter."""
+    t = Polygon(truth)
+    return Polygon(contour).buffer(0).symmetric_difference(t).area / t.length
+
+
+@settings(max_examples=10, deadline=None)
+@given(st.floats(-0.03, 0.03), st.floats(-0.03, 0.03), st.floats(-np.pi, np.pi), st.floats(0, 0.03))
+def test_one_view_fused_is_the_outline_in_the_frame_of_its_pose(x, y, th, top):
+    """A single mask seen at (x, y, θ), on the plane of the object's top: the contour lies on
+    the footprint in the object frame, to the 2.4 mm pixels' quantisation and the smoothing's
+    rounding (a wrong sign of θ or of the shift would move it by centimetres)."""
+    pose = np.array([x, y, th])
+    mask = rasterise_footprint(PENTAGON, pose, OUTLINE_CAMERA, top)
+    contour = fused_contour([mask], [pose], OUTLINE_CAMERA, top)
+    assert Polygon(contour).exterior.is_ccw
+    assert _boundary_error(contour, PENTAGON) < 1e-3
+    assert Polygon(contour).hausdorff_distance(Polygon(PENTAGON)) < 4e-3
+
+
+def test_views_at_other_poses_fused_come_closer_to_the_outline_than_one():
+    """Six masks of the pentagon at poses a few pushes apart: the pixel staircase falls
+    elsewhere on the object in each, so their fused contour's mean distance from the true
+    outline is well under that of one view's contour traced as the replay traces it (measured:
+    0.17 against 0.43 mm; one view at the fusion's smoothing: 0.36 mm)."""
+    rng = np.random.default_rng(5)
+    poses = [np.zeros(3)] + [
+        np.array([*rng.uniform(-0.02, 0.02, 2), rng.uniform(-0.5, 0.5)]) for _ in range(5)
+    ]
+    masks = [rasterise_footprint(PENTAGON, p, OUTLINE_CAMERA, 0.0) for p in poses]
+    fused = fused_contour(masks, poses, OUTLINE_CAMERA, 0.0)
+    single = outline_contour(masks[0], OUTLINE_CAMERA, 0.0)
+    one = to_object_frame(single.points, np.zeros(2), poses[0])
+    assert FUSION_SMOOTHING < 0.005  # less smoothing than one view needs
+    one_error, fused_error = _boundary_error(one, PENTAGON), _boundary_error(fused, PENTAGON)
+    assert fused_error < 0.6 * one_error
+    assert fused_error < 2.5e-4
+
+
+def test_a_mask_without_its_pose_or_an_empty_one_is_named():
+    mask = rasterise_footprint(PENTAGON, np.zeros(3), OUTLINE_CAMERA)
+    with pytest.raises(ValueError, match="one pose per mask"):
+        fused_contour([mask, mask], [np.zeros(3)], OUTLINE_CAMERA, 0.0)
+    with pytest.raises(ValueError, match="empty"):
+        fused_contour([np.zeros_like(mask)], [np.zeros(3)], OUTLINE_CAMERA, 0.0)

@@ -47,3 +47,18 @@ def test_an_elongated_ellipse_end_is_moved_at_most_the_extension_bound():
     ellipse = circle * np.array([1.0, 0.4])
     out = Polygon(sharpen_corners(ellipse))
     assert out.hausdorff_distance(Polygon(ellipse)) <= REPLAY_MAX_EXTENSION + 1e-6
+
+
+def test_a_contour_smoothed_less_has_its_corners_extended_less():
+    """How far a corner may be refitted beyond the contour scales with the smoothing the
+    contour was traced with: the end of a 2.5:1 ellipse, which the 5 mm smoothing's rule
+    extends by 10 mm (measured: 10.4 mm), stays as traced under the 2.5 mm rule the fused
+    outline uses (measured: 0.9 mm from the ellipse)."""
+    from pushtoknow.perception.footprint import FUSION_SMOOTHING, REPLAY_MAX_EXTENSION
+
+    circle = np.asarray(Point(0, 0).buffer(0.05, quad_segs=64).exterior.coords)[:-1]
+    ellipse = Polygon(circle * np.array([1.0, 0.4]))
+    coarse = Polygon(sharpen_corners(np.asarray(ellipse.exterior.coords)[:-1]))
+    fine = Polygon(sharpen_corners(np.asarray(ellipse.exterior.coords)[:-1], FUSION_SMOOTHING))
+    assert coarse.hausdorff_distance(ellipse) > 0.5 * REPLAY_MAX_EXTENSION
+    assert fine.hausdorff_distance(ellipse) < 1.5e-3

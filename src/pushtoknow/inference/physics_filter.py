@@ -8,6 +8,10 @@ pose is VisNet's refined geometrically, the first push's contour registered to t
 mask (`perception.registration.register`); each push's pose track is VisNet's from there,
 frame by frame, each frame's reference pose the previous measurement, and its end pose, at rest
 after the push, is registered the same way on the outline mask taken then (`end_pose`).
+With `PhysicsFilterConfig.outline_views` set, once that many views are registered (the first
+push's and each push's end) the replayed outline is traced again from all of them together
+(`perception.footprint.fused_outline`: the pixel staircase falls elsewhere in each), once, and
+the pushes before are refit on it.
 The parameter belief (a Gaussian over `identification.prior.fit_transform`'s coordinates,
 starting at the prior of the footprint seen, `identification.prior.footprint_prior`) is
 updated after each push by replaying it in the testbed's scene with that footprint
@@ -61,10 +65,12 @@ from pushtoknow.inference.estimator import (
 )
 from pushtoknow.models.checkpoint import TrainedModel
 from pushtoknow.perception.footprint import (
+    fused_outline,
     object_top,
     outline_contour,
     replay_contour,
     replay_outline,
+    to_object_frame,
 )
 from pushtoknow.perception.registration import outline_points, register
 from pushtoknow.perception.visnet import start_pose, visnet_poses
@@ -152,6 +158,10 @@ class PhysicsFilterEstimator(Estimator):
         self._last_pose: np.ndarray | None = None
         self._outline: np.ndarray | None = None  # (N, 2) first view's contour, object frame
         self._top: float | None = None  # m: the object's top seen in the first view
+        # outline masks and their poses (pose0 frame) the outline is refined from; None where
+        # the outline was given or a view lacks the outline-resolution mask
+        self._views: list[tuple[np.ndarray, np.ndarray]] | None = None
+        self._frame: np.ndarray | None = None  # (2,) the scene frame's origin, pose0 frame
         cfg = self.filter_config
         tactile = self.sim_config.tactile.force_noise_std
         force = cfg.force_noise or (tactile if tactile > 0 else UNKNOWN_FORCE_NOISE)
@@ -214,6 +224,12 @@ class PhysicsFilterEstimator(Estimator):
             height = max(object_top(view.depth, view.s0, self.camera), MIN_HEIGHT)
             shape, offset = outline_shape(fp)
             self._use_scene(ReplayScene(shape, height, self.sim_config, offset))
+            if view.outline_mask is not None:
+                self._views = [(view.outline_mask, np.asarray(pose0, dtype=np.float64))]
+                centroid = replay_contour(
+                    view.s0, view.depth, view.outline_mask, self.camera
+                ).centroid
+                self._frame = to_object_frame(centroid[None], pose0[:2], pose0)[0]
         assert self.scene is not None
         return self.scene
 
@@ -226,22 +242,56 @@ class PhysicsFilterEstimator(Estimator):
         """Replay pushes in `scene`; the prior becomes its footprint's."""
         self.scene = dataclasses.replace(scene, sim_config=self.sim_config)
         self.com_region = com_region(self.scene.footprint.vertices, COM_MARGIN)
-        self._prior_from_footprint(self.scene)
+        prior = self._prior_from_footprint(self.scene)
+        if prior is not None:
+            self.mean, self.cov = self.prior_mean, self.prior_cov = prior
 
-    def _prior_from_footprint(self, scene: ReplayScene) -> None:
-        """The prior once the footprint is seen (`prior.footprint_prior`): the CoM anywhere
-        in its convex hull, I_z about the uniform plate's."""
+    def _prior_from_footprint(self, scene: ReplayScene) -> tuple[np.ndarray, np.ndarray] | None:
+        """The prior (mean (5,), covariance (5, 5), fit coordinates) once the footprint is seen
+        (`prior.footprint_prior`): the CoM anywhere in its convex hull, I_z about the uniform
+        plate's; None where the footprint is too thin for the margin (the catalogue prior
+        stays)."""
         region = scene.footprint.com_region(COM_MARGIN)
         if region.is_empty or region.geom_type != "Polygon":
-            return  # too thin for the margin: the catalogue prior stays
+            return None
         _, plate = polygon_moments(scene.footprint.vertices)
         z, p_z = footprint_prior(
             np.asarray(region.exterior.coords)[:-1],
             float(np.sqrt(np.trace(plate))),
             self.filter_config.prior,
         )
-        self.mean = self.prior_mean = self.tmat @ z
-        self.cov = self.prior_cov = self.tmat @ p_z @ self.tmat.T
+        return self.tmat @ z, self.tmat @ p_z @ self.tmat.T
+
+    def _refine_outline(self, mask: np.ndarray | None, pose: np.ndarray | None) -> bool:
+        """Add a view of the object, its outline mask (kH, kW) seen at `pose` (3,); once
+        `PhysicsFilterConfig.outline_views` are in, replay from the outline traced on all of
+        them (`perception.footprint.fused_outline`) from now on, once per object: the belief's
+        CoM moved into the new scene's frame, the prior's CoM recentred on its hull. Returns
+        whether the outline changed."""
+        views, least = self._views, self.filter_config.outline_views
+        if views is None or least is None or self.scene is None or self._top is None:
+            return False
+        if mask is None or pose is None:
+            self._views = None  # a view without the outline mask: keep the first view's
+            return False
+        views.append((mask, np.asarray(pose, dtype=np.float64)))
+        if len(views) < least:
+            return False
+        self._views = None  # refined once
+        masks, poses = zip(*views)
+        fp = fused_outline(masks, poses, self.camera, self._top) - self._frame
+        shape, offset = outline_shape(fp)
+        old = np.asarray(self.scene.frame_offset)
+        scene = ReplayScene(shape, self.scene.height, self.sim_config, offset)
+        self.scene = scene
+        self.com_region = com_region(scene.footprint.vertices, COM_MARGIN)
+        prior = self._prior_from_footprint(scene)
+        if prior is not None:
+            self.prior_mean, self.prior_cov = prior
+        z = self.t_inv @ self.mean
+        z[2:4] += (old - np.asarray(offset)) / space_scale()[2:4]
+        self.mean = self.tmat @ z
+        return True
 
     def seen_object(self) -> tuple[np.ndarray, float] | None:
         """The outline the pushes are replayed with (`replay_outline`) and its height."""
@@ -302,13 +352,17 @@ class PhysicsFilterEstimator(Estimator):
 
     def update(self, record: PushRecord, view: View | None, pose0: np.ndarray) -> np.ndarray:
         """The belief after the executed push (module doc); returns VisNet's pose track."""
-        scene = self._scene(view, pose0)
+        self._scene(view, pose0)
         poses = self.perceive(record, view, pose0)
         seen = dataclasses.replace(record, pose=poses)
         (track,) = tracks_from_records([seen], self.sim_config)
         end = self.end_pose(record, poses[-1])
         if end is not None and self.filter_config.end_pose_noise is not None:
             track = dataclasses.replace(track, end_pose=end)
+        refitted = None
+        if self._refine_outline(record.outline_mask_end, end) and self.tracks:
+            refitted = self._refit_on_outline()
+        scene = self.scene
         extra = self._closed_form_start(seen) if not self.updates else []
         cfg = self.filter_config
         up = iterated_update(
@@ -339,6 +393,8 @@ class PhysicsFilterEstimator(Estimator):
             log.debug("push %d: refit reduced chi2 %.2f", len(self.tracks), batch.chi2)
             if batch.chi2 <= cfg.refit_gain * batch.start_chi2[1]:  # against the belief's mean
                 up = dataclasses.replace(batch, refit=True, replays=up.replays + batch.replays)
+        if refitted is not None:
+            up = dataclasses.replace(up, replays=up.replays + refitted.replays)
         self.mean, self.cov = up.mean, up.cov
         self.updates.append(up)
         log.debug(
@@ -354,6 +410,23 @@ class PhysicsFilterEstimator(Estimator):
             ", poor fit" if up.poor_fit else "",
         )
         return poses
+
+    def _refit_on_outline(self) -> PhysicsUpdate:
+        """The pushes so far read again on the refined outline (`_refine_outline`): every one
+        refit from the prior (`identification.recursive.refit`), the search begun at the
+        belief's mean, which becomes the refit's."""
+        batch = refit(
+            self.prior_mean,
+            self.prior_cov,
+            self.tracks,
+            self.scene,
+            self.pool,
+            self.sigmas,
+            self.filter_config,
+            [self.mean],
+        )
+        self.mean, self.cov = batch.mean, batch.cov
+        return batch
 
     def _refit_starts(self, mean: np.ndarray) -> list[np.ndarray]:
         """Starts (5,) of a `refit`: `mean`, and `mean` with its CoM at the prior's (the

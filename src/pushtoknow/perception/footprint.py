@@ -3,8 +3,11 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
+import contourpy
 import numpy as np
+from scipy.ndimage import gaussian_filter, map_coordinates
 
 from pushtoknow.common.camera import CameraModel
 from pushtoknow.geometry.affordances import Contour, mask_contour
@@ -131,13 +134,14 @@ def _fit_line(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
     return c, vt[0], float(sv[-1] / np.sqrt(len(points)))
 
 
-def sharpen_corners(contour: np.ndarray) -> np.ndarray:
+def sharpen_corners(contour: np.ndarray, smoothing: float = REPLAY_SMOOTHING) -> np.ndarray:
     """A polygon (V, 2) for a traced closed contour (N, 2), CCW. Douglas–Peucker edges at least
     `REPLAY_MIN_EDGE` long whose middle contour points lie on a line (RMS below
     `REPLAY_STRAIGHTNESS`) are refitted to those points; two such edges separated only by
     curved or short ones (a corner smoothing rounded off) are extended to meet, where they turn
     by more than `REPLAY_MIN_TURN` and meet no farther beyond the contour than smoothing rounds
-    a corner of that angle (`_rounded_corner`). Curves stay as traced."""
+    a corner of that angle (`_rounded_corner`; `smoothing`, m: the σ the contour was traced
+    with). Curves stay as traced."""
     from shapely.geometry import Polygon
 
     pts = np.asarray(contour, dtype=np.float64)
@@ -179,7 +183,7 @@ def sharpen_corners(contour: np.ndarray) -> np.ndarray:
         if abs(turn) > REPLAY_MIN_TURN:
             s = ((q - p)[0] * e[1] - (q - p)[1] * e[0]) / cross
             x = p + s * d
-            if _rounded_corner(x, turn, traced):
+            if _rounded_corner(x, turn, traced, smoothing):
                 corner = x
         out.extend([corner] if corner is not None else chain)
     if len(out) < 3:  # two straight edges meeting at both ends: no polygon, keep the trace
@@ -190,9 +194,9 @@ def sharpen_corners(contour: np.ndarray) -> np.ndarray:
     return np.asarray(out)
 
 
-def _rounded_corner(x: np.ndarray, turn: float, traced) -> bool:
+def _rounded_corner(x: np.ndarray, turn: float, traced, smoothing: float) -> bool:
     """Whether a corner at x (2,) turning by `turn` (rad) lies no farther outside the traced
-    contour than smoothing by `REPLAY_SMOOTHING` rounds such a corner off: a corner of
+    contour than smoothing by σ = `smoothing` (m) rounds such a corner off: a corner of
     interior angle α rounded to radius r lies r (1 / sin(α/2) − 1) beyond its arc; r is taken
     as 2σ, plus `REPLAY_CLIP_SLACK`, and never more than `REPLAY_MAX_EXTENSION`: the end of
     an elongated ellipse looks like a rounded corner too, and this bounds what a wrong guess
@@ -200,7 +204,7 @@ def _rounded_corner(x: np.ndarray, turn: float, traced) -> bool:
     from shapely.geometry import Point
 
     half = 0.5 * (math.pi - abs(turn))
-    clip = 2.0 * REPLAY_SMOOTHING * (1.0 / math.sin(half) - 1.0) + REPLAY_CLIP_SLACK
+    clip = 2.0 * smoothing * (1.0 / math.sin(half) - 1.0) + REPLAY_CLIP_SLACK
     return traced.exterior.distance(Point(*x)) <= min(clip, REPLAY_MAX_EXTENSION)
 
 
@@ -232,3 +236,60 @@ def outline_contour(mask: np.ndarray, camera: CameraModel, top: float) -> Contou
     """The contour (world, m) traced as `replay_contour` traces it on an object mask (H, W) or
     (kH, kW), on the plane at height `top` (m, the object's top)."""
     return mask_contour(mask, camera, top, smoothing=REPLAY_SMOOTHING)
+
+
+# The outline refined from several views (`fused_outline`): each outline mask is smoothed this
+# much, sampled on an object-frame grid this fine at the pose it was seen at, and the average
+# traced at one half. The pixel staircase (2.4 mm pixels at the outline resolution) falls at
+# another place on the object in each view, so fewer views need less smoothing than one.
+FUSION_SMOOTHING = 0.0025  # m
+FUSION_GRID = 5e-4  # m
+FUSION_MARGIN = 0.01  # m: the grid reaches this beyond every mask's pixels
+
+
+def fused_contour(
+    masks: Sequence[np.ndarray], poses: Sequence[np.ndarray], camera: CameraModel, top: float
+) -> np.ndarray:
+    """The object's contour (N, 2) in its object frame, CCW, from outline masks (kH, kW) (or
+    (H, W)) seen at poses (3,) (x, y, θ) of that frame, traced on the plane at height `top`
+    (m): each mask smoothed by `FUSION_SMOOTHING` and sampled bilinearly on an object-frame
+    grid of `FUSION_GRID`, the samples averaged over the views and traced at 0.5."""
+    if len(masks) != len(poses) or not masks:
+        raise ValueError(f"{len(masks)} masks for {len(poses)} poses: one pose per mask")
+    cams = [camera.resolution_of(np.asarray(m)) for m in masks]
+    seen = []
+    for mask, pose, cam in zip(masks, poses, cams):
+        v, u = np.nonzero(np.asarray(mask))
+        if u.size == 0:
+            raise ValueError("an outline mask is empty: the object is not in view")
+        world = cam.pixel_to_world(np.stack([u, v], 1).astype(np.float64), top)
+        seen.append(to_object_frame(world, np.asarray(pose[:2], dtype=np.float64), pose))
+    pts = np.concatenate(seen)
+    lo, hi = pts.min(axis=0) - FUSION_MARGIN, pts.max(axis=0) + FUSION_MARGIN
+    gx, gy = np.arange(lo[0], hi[0], FUSION_GRID), np.arange(lo[1], hi[1], FUSION_GRID)
+    grid = np.stack(np.meshgrid(gx, gy), -1).reshape(-1, 2)
+    average = np.zeros(len(grid))
+    for mask, pose, cam in zip(masks, poses, cams):
+        sigma = FUSION_SMOOTHING / cam.metres_per_pixel(top)
+        img = gaussian_filter(np.asarray(mask, np.float64), sigma)
+        c, s = math.cos(pose[2]), math.sin(pose[2])
+        world = grid @ np.array([[c, s], [-s, c]]) + np.asarray(pose[:2], dtype=np.float64)
+        uv = cam.world_to_pixel(world, top)
+        average += map_coordinates(img, [uv[:, 1], uv[:, 0]], order=1, mode="constant")
+    average = (average / len(masks)).reshape(len(gy), len(gx))
+    line = max(contourpy.contour_generator(x=gx, y=gy, z=average).lines(0.5), key=len)
+    if np.allclose(line[0], line[-1]):
+        line = line[:-1]
+    x, y = line[:, 0], line[:, 1]
+    if np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y) < 0:
+        line = line[::-1]
+    return np.asarray(line, dtype=np.float64)
+
+
+def fused_outline(
+    masks: Sequence[np.ndarray], poses: Sequence[np.ndarray], camera: CameraModel, top: float
+) -> np.ndarray:
+    """The footprint (V, 2) a simulator replays pushes with, from several views
+    (`fused_contour`, same arguments), corners sharpened (`sharpen_corners`) as rounded by
+    `FUSION_SMOOTHING`, in the object frame the poses are of."""
+    return sharpen_corners(fused_contour(masks, poses, camera, top), FUSION_SMOOTHING)
