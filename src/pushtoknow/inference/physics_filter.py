@@ -220,16 +220,13 @@ class PhysicsFilterEstimator(Estimator):
                     "no outline given: the physics estimator needs the object's outline (a "
                     "recording's, or one traced in an image)",
                 )
-            fp = replay_outline(view.s0, view.depth, view.outline_mask, self.camera, pose0)
+            contour = replay_contour(view.s0, view.depth, view.outline_mask, self.camera)
             height = max(object_top(view.depth, view.s0, self.camera), MIN_HEIGHT)
-            shape, offset = outline_shape(fp)
+            shape, offset = outline_shape(replay_outline(contour, pose0))
             self._use_scene(ReplayScene(shape, height, self.sim_config, offset))
             if view.outline_mask is not None:
                 self._views = [(view.outline_mask, np.asarray(pose0, dtype=np.float64))]
-                centroid = replay_contour(
-                    view.s0, view.depth, view.outline_mask, self.camera
-                ).centroid
-                self._frame = to_object_frame(centroid[None], pose0[:2], pose0)[0]
+                self._frame = to_object_frame(contour.centroid[None], pose0[:2], pose0)[0]
         assert self.scene is not None
         return self.scene
 
@@ -242,25 +239,22 @@ class PhysicsFilterEstimator(Estimator):
         """Replay pushes in `scene`; the prior becomes its footprint's."""
         self.scene = dataclasses.replace(scene, sim_config=self.sim_config)
         self.com_region = com_region(self.scene.footprint.vertices, COM_MARGIN)
-        prior = self._prior_from_footprint(self.scene)
-        if prior is not None:
-            self.mean, self.cov = self.prior_mean, self.prior_cov = prior
+        self._prior_from_footprint(self.scene)
 
-    def _prior_from_footprint(self, scene: ReplayScene) -> tuple[np.ndarray, np.ndarray] | None:
-        """The prior (mean (5,), covariance (5, 5), fit coordinates) once the footprint is seen
-        (`prior.footprint_prior`): the CoM anywhere in its convex hull, I_z about the uniform
-        plate's; None where the footprint is too thin for the margin (the catalogue prior
-        stays)."""
+    def _prior_from_footprint(self, scene: ReplayScene) -> None:
+        """The prior once the footprint is seen (`prior.footprint_prior`): the CoM anywhere
+        in its convex hull, I_z about the uniform plate's."""
         region = scene.footprint.com_region(COM_MARGIN)
         if region.is_empty or region.geom_type != "Polygon":
-            return None
+            return  # too thin for the margin: the catalogue prior stays
         _, plate = polygon_moments(scene.footprint.vertices)
         z, p_z = footprint_prior(
             np.asarray(region.exterior.coords)[:-1],
             float(np.sqrt(np.trace(plate))),
             self.filter_config.prior,
         )
-        return self.tmat @ z, self.tmat @ p_z @ self.tmat.T
+        self.mean = self.prior_mean = self.tmat @ z
+        self.cov = self.prior_cov = self.tmat @ p_z @ self.tmat.T
 
     def _refine_outline(self, mask: np.ndarray | None, pose: np.ndarray | None) -> bool:
         """Add a view of the object, its outline mask (kH, kW) seen at `pose` (3,); once
@@ -281,16 +275,10 @@ class PhysicsFilterEstimator(Estimator):
         masks, poses = zip(*views)
         fp = fused_outline(masks, poses, self.camera, self._top) - self._frame
         shape, offset = outline_shape(fp)
-        old = np.asarray(self.scene.frame_offset)
-        scene = ReplayScene(shape, self.scene.height, self.sim_config, offset)
-        self.scene = scene
-        self.com_region = com_region(scene.footprint.vertices, COM_MARGIN)
-        prior = self._prior_from_footprint(scene)
-        if prior is not None:
-            self.prior_mean, self.prior_cov = prior
-        z = self.t_inv @ self.mean
-        z[2:4] += (old - np.asarray(offset)) / space_scale()[2:4]
-        self.mean = self.tmat @ z
+        z, cov = self.t_inv @ self.mean, self.cov
+        z[2:4] += (np.asarray(self.scene.frame_offset) - offset) / space_scale()[2:4]
+        self._use_scene(ReplayScene(shape, self.scene.height, self.sim_config, offset))
+        self.mean, self.cov = self.tmat @ z, cov  # the belief stays; the prior is the new one's
         return True
 
     def seen_object(self) -> tuple[np.ndarray, float] | None:

@@ -208,18 +208,11 @@ def _rounded_corner(x: np.ndarray, turn: float, traced, smoothing: float) -> boo
     return traced.exterior.distance(Point(*x)) <= min(clip, REPLAY_MAX_EXTENSION)
 
 
-def replay_outline(
-    s0: np.ndarray,
-    depth: np.ndarray,
-    outline_mask: np.ndarray | None,
-    camera: CameraModel,
-    pose0,
-) -> np.ndarray:
+def replay_outline(contour: Contour, pose0) -> np.ndarray:
     """The footprint (V, 2) a simulator replays the pushes with, in the object frame of pose0
-    (x, y, θ): the `replay_contour`, corners sharpened (`sharpen_corners`), about its
-    centroid."""
-    c = replay_contour(s0, depth, outline_mask, camera)
-    return to_object_frame(sharpen_corners(c.points), c.centroid, pose0)
+    (x, y, θ): the `replay_contour` seen at pose0, corners sharpened (`sharpen_corners`), about
+    its centroid."""
+    return to_object_frame(sharpen_corners(contour.points), contour.centroid, pose0)
 
 
 def replay_contour(
