@@ -1,4 +1,5 @@
-"""Replays through the per-process cache of compiled scenes (`replay.compiled_simulator`)."""
+"""Replays through the per-process cache of compiled scenes (`replay.compiled_simulator`) and
+the pool's memory of replays run (`replay.RolloutPool`)."""
 
 import numpy as np
 
@@ -40,6 +41,48 @@ def test_cached_replays_equal_fresh_builds_and_the_cache_stays_bounded(monkeypat
         phi[2:4] += rng.uniform(-2e-3, 2e-3, 2) * (i % 2)  # every other one moves the CoM
         np.testing.assert_array_equal(simulate_track(scene, phi, track), _fresh(phi, track))
         assert len(replay._compiled) <= 3
+
+
+def _recorded_track(push: Push) -> PushTrack:
+    sim = PushSimulator(SPEC, CONFIG)
+    sim.reset()
+    rec = sim.execute(push, np.random.default_rng(0))
+    return PushTrack(push, rec.pusher[0], rec.pose[0], rec.tactile[:, :2], rec.pose)
+
+
+def test_the_pool_runs_a_replay_once_and_what_it_remembers_is_what_a_fresh_one_gives(
+    monkeypatch,
+):
+    """A (φ, push) asked for again, in the same batch or a later one, is not replayed: the
+    answer is the fresh replay's, read-only. What was observed (force, pose) is not part of
+    a replay; where the pad starts and φ's last bit are. The memory stays bounded."""
+    monkeypatch.setattr(replay, "REMEMBERED_REPLAYS", 3)
+    x_min = float(SPEC.footprint.polygon.bounds[0])
+    track = _recorded_track(Push((x_min, 0.005), 0.1, "constant", 0.02))
+    scene = ReplayScene(shape=SPEC.shape, height=SPEC.height, sim_config=CONFIG, stop_at_rest=None)
+    phi = SPEC.params.as_array()
+    with replay.RolloutPool(1) as pool:
+        (first,), (again,) = pool.run(scene, np.stack([phi, phi]), [track])
+        assert pool.push_rollouts == 1 and pool.rollouts == 2
+        np.testing.assert_array_equal(first, _fresh(phi, track))
+        assert again is first and not first.flags.writeable
+        seen_otherwise = PushTrack(track.push, track.start, track.pose0, 0 * track.force,
+                                   track.pose + 1e-3)  # fmt: skip
+        pool.run(scene, phi, [seen_otherwise])
+        assert pool.push_rollouts == 1
+        moved = PushTrack(track.push, track.start + np.array([0.0, 1e-3]), track.pose0, track.force,
+                          track.pose)  # fmt: skip
+        nudged = phi.copy()
+        nudged[0] = np.nextafter(phi[0], 1.0)
+        (m,), (n,) = pool.run_each(scene, np.stack([phi, nudged]), [[moved], [track]])
+        assert pool.push_rollouts == 3
+        np.testing.assert_array_equal(m, _fresh(phi, moved))
+        np.testing.assert_array_equal(n, _fresh(nudged, track))
+        assert len(pool._done) == 3
+        pool.run(scene, phi * [1.1, 1, 1, 1, 1], [track])  # a fourth: the oldest is forgotten
+        assert len(pool._done) == 3
+        pool.run(scene, phi, [track])
+        assert pool.push_rollouts == 5
 
 
 def test_a_recorded_pad_that_starts_a_push_fast_is_not_quasi_static():

@@ -66,6 +66,41 @@ def test_a_contact_offset_moves_every_pad_track_along_the_push():
     np.testing.assert_array_equal(track.pad_fine, fine)  # the original is left as it was
 
 
+def test_a_probe_of_one_push_s_contact_offset_replays_that_push_only():
+    """The forward-difference probe of push k's contact offset changes nothing the other
+    pushes' replays depend on: only push k is replayed again, and the residuals equal those
+    of a pool that replays everything afresh."""
+    from pushtoknow.common.params import normalise_params
+    from pushtoknow.identification.fit import tracks_from_records
+    from pushtoknow.identification.prior import fit_transform
+    from pushtoknow.identification.replay import ReplayScene, RolloutPool
+    from pushtoknow.identification.residuals import ReplayResiduals
+    from pushtoknow.identification.synthetic import simulate_pushes
+    from pushtoknow.testbed.random_shapes import random_object_at
+    from pushtoknow.testbed.sim_config import SimConfig
+
+    spec = random_object_at(101, 5)
+    config = SimConfig(render=False)
+    tracks = tracks_from_records(simulate_pushes(spec, ["release", "release", "release"]), config)
+    scene = ReplayScene(spec.shape, spec.height, config)
+    sigmas = np.array([0.1, 0.1, 2e-3, 2e-3, 0.04])
+    u = np.append(fit_transform() @ normalise_params(spec.params.as_array()), [0.2, -0.1, 0.3])
+    probe = u.copy()
+    probe[6] += 0.3
+    with RolloutPool(1) as pool, RolloutPool(1) as fresh:
+        res = ReplayResiduals(scene, tracks, pool, sigmas)
+        r_u = res.residuals(u)
+        assert pool.push_rollouts == 3
+        r_probe = res.residuals(probe)
+        assert pool.push_rollouts == 4
+        alone = ReplayResiduals(scene, tracks, fresh, sigmas)
+        np.testing.assert_array_equal(r_probe, alone.residuals(probe))
+    changed = np.abs(r_probe - r_u)[0, : res.n_samples].reshape(-1, 5)
+    lengths = np.cumsum([0, *res.push_lengths])
+    assert changed[lengths[1] : lengths[2]].max() > 0  # the probed push moved
+    assert changed[: lengths[1]].max() == 0 and changed[lengths[2] :].max() == 0
+
+
 def test_a_real_pusher_holding_the_object_at_rest_carries_no_force_residual():
     """Replayed along a recorded pad, the force samples up to and including the object's
     breakaway and after it has come to its final rest weigh 0 (static friction: a preload, the

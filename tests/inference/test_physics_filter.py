@@ -192,6 +192,7 @@ def test_a_poor_push_refits_every_push_so_far_and_keeps_the_refit_only_where_it_
     np.testing.assert_allclose(est.mean, prior_mean - 0.02)
     est.update(_Record(poses[2]), None, np.zeros(3))  # a refit that gains too little
     assert len(refits) == 2 and not est.updates[-1].refit
+    assert est.updates[-1].replays == 46  # the refit not kept still took its replays
     np.testing.assert_allclose(est.mean, prior_mean - 0.02 + 0.01)
     est.update(_Record(poses[3]), None, np.zeros(3))  # two refits tried: no more
     assert len(refits) == 2

@@ -188,10 +188,38 @@ def _task(args) -> np.ndarray:
         raise IdentificationError(f"replaying a push with φ = {phi.tolist()} failed: {e}") from None
 
 
+REMEMBERED_REPLAYS = 4096  # single-push replays a `RolloutPool` keeps (`replay_key`)
+
+
+def scene_key(scene: ReplayScene) -> bytes:
+    """What a replay of `scene` depends on, as bytes (its outline, height, settings, frame)."""
+    return (
+        json.dumps(
+            [scene.shape, scene.height, scene.frame_offset, scene.stop_at_rest], sort_keys=True
+        ).encode()
+        + scene.sim_config.model_dump_json().encode()
+    )
+
+
+def replay_key(scene: bytes, phi: np.ndarray, track: PushTrack) -> tuple:
+    """What `simulate_track` of (φ, track) in the scene of `scene_key` depends on: φ's bits
+    and the push as driven (action, pad start and tracks, start pose), not what was observed."""
+    push = track.push
+    return (
+        scene,
+        np.asarray(phi, dtype=np.float64).tobytes(),
+        (push.contact, push.direction, push.profile, push.speed),
+        *(None if a is None else np.asarray(a, np.float64).tobytes() for a in (
+            track.start, track.pose0, track.pad, track.pad_fine)),
+    )  # fmt: skip
+
+
 class RolloutPool:
     """Runs batches of (φ, push) replays on `workers` (local processes, 1: in this process, or a
-    `TaskRunner`). `rollouts` counts candidate φ replayed over all pushes, `push_rollouts`
-    single pushes."""
+    `TaskRunner`), remembering the last `REMEMBERED_REPLAYS` (a replay is deterministic: one
+    asked for again, such as the pushes a finite-difference probe of another push's contact
+    offset leaves unchanged, is not run again). `rollouts` counts candidate φ replayed over all
+    pushes, `push_rollouts` single pushes run (not those remembered)."""
 
     def __init__(self, workers: Workers = 1):
         self._owned = not isinstance(workers, TaskRunner)
@@ -199,6 +227,7 @@ class RolloutPool:
         self.workers = self.runner.workers
         self.rollouts = 0
         self.push_rollouts = 0
+        self._done: OrderedDict[tuple, np.ndarray] = OrderedDict()
 
     def __enter__(self) -> RolloutPool:
         return self
@@ -223,8 +252,22 @@ class RolloutPool:
     ) -> list[list[np.ndarray]]:
         """As `run`, each φ (B, 5) with its own pushes tracks[b] (K each)."""
         tasks = [(scene, phi, tr) for phi, trs in zip(phis, tracks, strict=True) for tr in trs]
-        out = self.runner.map(_task, tasks)
+        where = scene_key(scene)
+        keys = [replay_key(where, phi, tr) for _, phi, tr in tasks]
+        todo = {}  # key → index of the first task asking for it, among those not remembered
+        for i, key in enumerate(keys):
+            if key not in self._done:
+                todo.setdefault(key, i)
+        ran = self.runner.map(_task, [tasks[i] for i in todo.values()])
+        for key, sim in zip(todo, ran, strict=True):
+            sim.setflags(write=False)  # shared by every task asking for it
+            self._done[key] = sim
+        out = [self._done[key] for key in keys]
+        for key in keys:
+            self._done.move_to_end(key)
+        while len(self._done) > REMEMBERED_REPLAYS:
+            self._done.popitem(last=False)
         self.rollouts += len(phis)
-        self.push_rollouts += len(tasks)
+        self.push_rollouts += len(todo)
         k = len(tracks[0]) if tracks else 0
         return [out[b * k : (b + 1) * k] for b in range(len(phis))]

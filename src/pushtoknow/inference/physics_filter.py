@@ -379,8 +379,11 @@ class PhysicsFilterEstimator(Estimator):
                 self._refit_starts(up.mean),
             )
             log.debug("push %d: refit reduced chi2 %.2f", len(self.tracks), batch.chi2)
+            replays = up.replays + batch.replays  # the refit's count, kept or not
             if batch.chi2 <= cfg.refit_gain * batch.start_chi2[1]:  # against the belief's mean
-                up = dataclasses.replace(batch, refit=True, replays=up.replays + batch.replays)
+                up = dataclasses.replace(batch, refit=True, replays=replays)
+            else:
+                up = dataclasses.replace(up, replays=replays)
         if refitted is not None:
             up = dataclasses.replace(up, replays=up.replays + refitted.replays)
         self.mean, self.cov = up.mean, up.cov
