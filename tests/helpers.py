@@ -60,10 +60,18 @@ def record_run(estimator: str, recording: str, policies: tuple[str, ...]) -> Non
     (Path(__file__).parent / "inference" / "data" / recording).write_text(json.dumps(out))
 
 
-def assert_recorded_run(estimator: str, recording: str, rtol: float, atol: float) -> list:
+def assert_recorded_run(
+    estimator: str,
+    recording: str,
+    rtol: float,
+    atol: float,
+    correlation_atol: float | None = None,
+) -> list:
     """Run `recorded_run` under each policy of tests/inference/data/`recording`; assert its
-    pushes equal the recorded ones and its normalised beliefs equal them within (rtol, atol).
-    Returns each policy's `(InferenceConfig, InferenceResult)`."""
+    pushes equal the recorded ones and its normalised beliefs equal them within (rtol, atol);
+    with `correlation_atol`, each covariance as its standard deviations (within rtol, atol)
+    and correlations (within correlation_atol) instead of entry by entry. Returns each
+    policy's `(InferenceConfig, InferenceResult)`."""
     import json
     from pathlib import Path
 
@@ -74,6 +82,15 @@ def assert_recorded_run(estimator: str, recording: str, rtol: float, atol: float
         assert [e.push.as_array().tolist() for e in res.estimates] == want["pushes"]
         for name in BELIEF_FIELDS:
             got = np.array([getattr(e, name) for e in res.estimates])
+            if name == "cov_norm" and correlation_atol is not None:
+                for k, (g, w) in enumerate(zip(got, np.asarray(want[name]), strict=True)):
+                    s_g, s_w = np.sqrt(np.diagonal(g)), np.sqrt(np.diagonal(w))
+                    np.testing.assert_allclose(s_g, s_w, rtol=rtol, atol=atol, err_msg=f"std {k}")
+                    np.testing.assert_allclose(
+                        g / np.outer(s_g, s_g), w / np.outer(s_w, s_w), atol=correlation_atol,
+                        err_msg=f"correlation {k}",
+                    )  # fmt: skip
+                continue
             np.testing.assert_allclose(got, want[name], rtol=rtol, atol=atol, err_msg=name)
         runs.append((cfg, res))
     return runs

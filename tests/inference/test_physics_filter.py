@@ -235,12 +235,16 @@ def test_the_physics_filter_gives_the_recorded_beliefs():
     """Same seed, same result: the physics filter's pushes and beliefs on held-out catalogue:117
     (2 uniform pushes, constant and release) equal those recorded in tests/inference/data: the
     pushes exactly, the beliefs to another machine's rounding, which the replay's jitter in the
-    linearised information carries into the covariance (between two x86-64 machines: the mean
-    7e-5 relative, the covariance's entries by up to 1e-3). A changed random stream shows in the
-    pushes, a changed replay or fit step in the beliefs."""
+    linearised information carries into the covariance, and the rendering into the outline
+    traced (on an AMD EPYC against the recording's machine: the prior's CoM 0.003 apart in
+    normalised units, the standard deviations by up to 2%, the weak m–I_z correlation 0.06
+    against 0.08, so the covariance is compared as standard deviations and correlations). A
+    changed random stream shows in the pushes, a changed replay or fit step in the beliefs."""
     from helpers import assert_recorded_run
 
-    assert_recorded_run("physics", "physics_filter_catalogue117_seed0.json", rtol=0.05, atol=2e-3)
+    assert_recorded_run(
+        "physics", "physics_filter_catalogue117_seed0.json", 0.05, 4e-3, correlation_atol=0.05
+    )
 
 
 def test_later_start_poses_are_registered_to_the_first_outline_where_visnet_is_lost(model):
