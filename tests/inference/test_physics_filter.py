@@ -110,6 +110,22 @@ def test_the_estimator_is_chosen_by_name(model):
     est.close()
 
 
+def test_estimators_one_after_another_share_the_started_replay_processes(model):
+    """The pool is this process's (`replay.shared_pool`): closing one object's estimator
+    leaves its processes, and what they replayed, to the next object's; another worker count
+    is another pool."""
+    from pushtoknow.identification.recursive import PhysicsFilterConfig
+    from pushtoknow.identification.replay import shared_pool
+
+    first = PhysicsFilterEstimator(model, filter_config=PhysicsFilterConfig(workers=1))
+    pool = first.pool
+    first.close()
+    second = PhysicsFilterEstimator(model, filter_config=PhysicsFilterConfig(workers=1))
+    assert second.pool is pool is shared_pool(1)
+    assert shared_pool(3) is not pool and shared_pool(3).workers == 3
+    second.close()
+
+
 def test_the_split_floor_widens_m_and_mu_not_their_product_once_pushes_were_seen(model):
     """`split_floor` adds its variance to log m and log μ at fixed log μ·m, only once a push was
     seen; the CoM floor adds to the CoM alone, the I_z floor to log I_z alone."""

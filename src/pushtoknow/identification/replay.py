@@ -17,6 +17,7 @@ pad servo-driven (a slightly different model: see there). So the batch runs the 
 
 from __future__ import annotations
 
+import atexit
 import json
 from collections import OrderedDict
 from dataclasses import dataclass
@@ -271,3 +272,24 @@ class RolloutPool:
         self.push_rollouts += len(todo)
         k = len(tracks[0]) if tracks else 0
         return [out[b * k : (b + 1) * k] for b in range(len(phis))]
+
+
+_shared: dict[int, RolloutPool] = {}
+
+
+def shared_pool(workers: int) -> RolloutPool:
+    """This process's `RolloutPool` of `workers` local processes, started on first use and kept
+    until the process ends: estimators of one object after another (a robot's session, an
+    evaluation, a benchmark) share its started workers, their compiled scenes and its
+    remembered replays instead of starting processes for every object."""
+    pool = _shared.get(workers)
+    if pool is None:
+        pool = _shared[workers] = RolloutPool(workers)
+    return pool
+
+
+@atexit.register
+def _close_shared() -> None:
+    for pool in _shared.values():
+        pool.close()
+    _shared.clear()

@@ -56,7 +56,7 @@ from pushtoknow.identification.recursive import (
     iterated_update,
     refit,
 )
-from pushtoknow.identification.replay import PushTrack, ReplayScene, RolloutPool
+from pushtoknow.identification.replay import PushTrack, ReplayScene, RolloutPool, shared_pool
 from pushtoknow.inference.estimator import (
     Estimator,
     InferenceConfig,
@@ -171,14 +171,15 @@ class PhysicsFilterEstimator(Estimator):
 
     @property
     def pool(self) -> RolloutPool:
+        """The replay processes: this process's shared pool (`replay.shared_pool`), kept for
+        the next object's estimator."""
         if self._pool is None:
-            self._pool = RolloutPool(self.filter_config.workers)
+            self._pool = shared_pool(self.filter_config.workers)
         return self._pool
 
     def close(self) -> None:
-        if self._pool is not None:
-            self._pool.close()
-            self._pool = None
+        """Let go of the pool (the shared pool's processes stay for the next object)."""
+        self._pool = None
 
     def belief_norm(self, cov_u: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """The belief over the normalised parameters, the CoM in the object frame: mean (5,),
