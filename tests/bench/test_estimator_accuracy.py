@@ -20,7 +20,7 @@ def run(*args, check=True):
     return subprocess.run([*EXE, *args], capture_output=True, text=True, env=env, check=check)
 
 
-def _row(i, update_s, object_s, errors, zscores, inside=None):
+def _row(i, update_s, object_s, errors, zscores, inside=None, replays=None):
     return ObjectRow(
         ref=f"random:1:{i}",
         name=f"random:1:{i}:box",
@@ -30,13 +30,21 @@ def _row(i, update_s, object_s, errors, zscores, inside=None):
         zscore=dict(zip(PARAM_NAMES, zscores)),
         mean_inside_interval=dict(zip(PARAM_NAMES, inside or [True] * 5)),
         profiles_chosen=["constant"] * len(update_s),
+        replays=replays or [0] * len(update_s),
     )
 
 
 def test_summary_pools_the_rows():
     rows = [
-        _row(0, [1.0, 2.0], 10.0, [0.1, 0.0, 0.2, 0.3, 0.4], [0.5, 1.64, -1.0, 0.0, 3.0]),
-        _row(1, [3.0], 20.0, [0.3, 0.3, 0.2, 0.0, 0.4], [-2.0, 1.65, 1.0, 0.0, 0.1]),
+        _row(
+            0,
+            [1.0, 2.0],
+            10.0,
+            [0.1, 0.0, 0.2, 0.3, 0.4],
+            [0.5, 1.64, -1.0, 0.0, 3.0],
+            replays=[40, 300],
+        ),
+        _row(1, [3.0], 20.0, [0.3, 0.3, 0.2, 0.0, 0.4], [-2.0, 1.65, 1.0, 0.0, 0.1], replays=[50]),
         _row(
             2,
             [4.0, 5.0, 6.0],
@@ -44,6 +52,7 @@ def test_summary_pools_the_rows():
             [0.2, 0.6, 0.2, 0.0, 0.1],
             [1.0, -1.7, -1.7, 0.0, -0.2],
             [True, False, True, False, True],
+            [60, 45, 55],
         ),
     ]
     s = summarise(rows)
@@ -52,6 +61,8 @@ def test_summary_pools_the_rows():
     assert s.update_s_median == pytest.approx(3.5)
     assert s.update_s_max == 6.0
     assert s.object_s_median == 20.0  # the median, not the mean (40)
+    assert s.replays_median == 52.5  # of every update: 40 45 50 | 55 60 300
+    assert s.replays_object_median == 160  # the objects' sums: 340, 50, 160
     want = {"mass": 0.2, "friction": 0.3, "com_x": 0.2, "com_y": 0.1, "inertia": 0.3}
     assert s.error_norm_mean == pytest.approx(want)
     assert s.error_norm_overall == pytest.approx(1.1 / 5)
@@ -103,6 +114,7 @@ def test_tiny_run_through_the_cli(tmp_path):
     assert s["objects"] == 1 and s["updates"] == 1
     assert s["update_s_median"] == s["update_s_max"] == obj["update_s"][0]
     assert s["object_s_median"] == obj["object_s"]
+    assert obj["replays"] == [0] and s["replays_median"] == 0  # the learned filter replays none
     assert s["error_norm_mean"] == pytest.approx(obj["error_norm"])
     assert s["error_norm_overall"] == pytest.approx(sum(obj["error_norm"].values()) / 5)
     for p in PARAM_NAMES:

@@ -16,7 +16,7 @@ from __future__ import annotations
 import os
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 
 import numpy as np
 import torch
@@ -42,7 +42,9 @@ class ObjectRow:
     (PARAM_NAMES keys): |mean − truth| / (catalogue range) (`error_norm`), the z-score of the
     truth (`zscore`), and whether the mean lies inside its own 90% interval
     (`mean_inside_interval`); the speed profile of each executed push (`profiles_chosen`: what
-    an active policy picked)."""
+    an active policy picked); the single-push simulations each update ran (`replays`,
+    `Estimator.replays`: the cost that does not vary with the host; zeros for the learned
+    filter)."""
 
     ref: str
     name: str
@@ -52,6 +54,7 @@ class ObjectRow:
     zscore: dict[str, float]
     mean_inside_interval: dict[str, bool]
     profiles_chosen: list[str]
+    replays: list[int] = field(default_factory=list)
 
 
 @dataclass(frozen=True)
@@ -60,13 +63,17 @@ class EstimatorSummary:
     update of every object; object_s_median over the objects' whole runs; error_norm_mean per
     parameter and error_norm_overall (the mean of the five); coverage90 per parameter (the
     share of objects with |z| ≤ 1.645); means_outside_interval (object × parameter pairs whose
-    mean lies outside its own 90% interval; must be 0); updates (how many were timed)."""
+    mean lies outside its own 90% interval; must be 0); updates (how many were timed);
+    replays_median over every update and replays_object_median over the objects' sums (the
+    work behind the seconds, the same on every host)."""
 
     objects: int
     updates: int
     update_s_median: float
     update_s_max: float
     object_s_median: float
+    replays_median: float
+    replays_object_median: float
     error_norm_mean: dict[str, float]
     error_norm_overall: float
     coverage90: dict[str, float]
@@ -109,6 +116,8 @@ def summarise(rows: Sequence[ObjectRow]) -> EstimatorSummary:
         update_s_median=median_or_nan(updates),
         update_s_max=float(max(updates)) if updates else float("nan"),
         object_s_median=median_or_nan([r.object_s for r in rows]),
+        replays_median=median_or_nan([n for r in rows for n in r.replays]),
+        replays_object_median=median_or_nan([sum(r.replays) for r in rows]),
         error_norm_mean=error_mean,
         error_norm_overall=overall,
         coverage90=covered,
@@ -134,6 +143,7 @@ def object_row(ref: str, result, object_s: float) -> ObjectRow:
         zscore={p: float(v) for p, v in zip(PARAM_NAMES, z, strict=True)},
         mean_inside_interval={p: bool(v) for p, v in zip(PARAM_NAMES, inside, strict=True)},
         profiles_chosen=[r.push.profile for r in result.records],
+        replays=[int(n) for n in result.replays],
     )
 
 

@@ -181,7 +181,8 @@ def bench_estimator_cmd(
     def progress(i, row) -> None:
         err_console.print(
             f"object {i + 1}/{n} {row.name or row.ref}: {len(row.update_s)} updates, "
-            f"median {statistics.median(row.update_s):.2f} s, object {row.object_s:.1f} s",
+            f"median {statistics.median(row.update_s):.2f} s, object {row.object_s:.1f} s, "
+            f"{sum(row.replays)} replays",
             highlight=False,
         )
 
@@ -258,6 +259,8 @@ def _print_estimator_bench(report) -> None:
             "update_s_median": s.update_s_median,
             "update_s_max": s.update_s_max,
             "object_s_median": s.object_s_median,
+            "replays_median": s.replays_median,
+            "replays_object_median": s.replays_object_median,
             "updates": s.updates,
             "means_outside_interval": s.means_outside_interval,
             "cpu_count": report.cpu_count,

@@ -142,8 +142,9 @@ def belief_to_estimate(
 class InferenceResult:
     """prior: the belief before any push; estimates: one per push; truth: SI (K,) or None;
     records: the executed pushes; poses: the pose track each update used (T, 3);
-    estimator: its name; seconds: wall time of each push's update (not in the JSON, which
-    the same seed makes identical); outline (V, 2) (m, object frame) and height (m): the
+    estimator: its name; seconds: wall time of each push's update and replays: the
+    single-push simulations it ran (`Estimator.replays`; neither in the JSON, which the same
+    seed makes identical); outline (V, 2) (m, object frame) and height (m): the
     object as the estimator saw it (`Estimator.seen_object`), None before any push."""
 
     prior: PushEstimate
@@ -154,6 +155,7 @@ class InferenceResult:
     object_name: str = ""
     estimator: str = ""
     seconds: list[float] = field(default_factory=list)
+    replays: list[int] = field(default_factory=list)
     outline: np.ndarray | None = None
     height: float | None = None
 
@@ -237,6 +239,11 @@ class Estimator(ABC):
     def seen_object(self) -> tuple[np.ndarray, float] | None:
         """The object as seen at the first push: its outline (V, 2) (m, in the object frame the
         estimates use) and height (m); None before `see_object`."""
+
+    def replays(self) -> int:
+        """Single-push simulations the last update ran: its cost on any machine, where wall
+        time varies with the host (0: an estimator without the simulator in the loop)."""
+        return 0
 
     def close(self) -> None:  # noqa: B027 - optional hook
         """Release what the estimator holds (worker processes)."""

@@ -177,6 +177,10 @@ class PhysicsFilterEstimator(Estimator):
             self._pool = shared_pool(self.filter_config.workers)
         return self._pool
 
+    def replays(self) -> int:
+        """Single-push replays the last update ran (`PhysicsUpdate.replays`)."""
+        return self.updates[-1].replays if self.updates else 0
+
     def close(self) -> None:
         """Let go of the pool (the shared pool's processes stay for the next object)."""
         self._pool = None

@@ -176,6 +176,7 @@ def _update(
     t0 = time.perf_counter()
     result.poses.append(est.update(rec, view, pose0))
     result.seconds.append(time.perf_counter() - t0)
+    result.replays.append(est.replays())
     result.records.append(rec)
     e = est.estimate(len(result.estimates) + 1, rec.push)
     result.estimates.append(e)
