@@ -40,6 +40,16 @@ class Contour:
         return np.array([((x + xn) * cross).sum(), ((y + yn) * cross).sum()]) / (6 * a)
 
 
+def largest_level_line(
+    z: np.ndarray, x: np.ndarray | None = None, y: np.ndarray | None = None
+) -> np.ndarray:
+    """The longest line (N, 2) where the image z (H, W) crosses 0.5, as (x, y) on the grid of
+    x (W,) and y (H,) (None: column and row indices), its closing repeat of the first point
+    dropped."""
+    line = max(contourpy.contour_generator(x=x, y=y, z=z).lines(0.5), key=len)
+    return line[:-1] if np.allclose(line[0], line[-1]) else line
+
+
 def mask_contour(
     s0: np.ndarray, camera: CameraModel, z: float = 0.0, smoothing: float | None = None
 ) -> Contour:
@@ -59,11 +69,7 @@ def mask_contour(
         raise ValueError("the segmentation S_0 is empty: the object is not in view")
     sigma_px = MASK_SMOOTHING_PX if smoothing is None else smoothing / camera.metres_per_pixel(z)
     img = np.pad(gaussian_filter(s0.astype(np.float64), sigma_px), 1)
-    lines = contourpy.contour_generator(z=img).lines(0.5)
-    line = max(lines, key=len)
-    uv = line - 1.0  # contourpy gives (x=column, y=row) = (u, v); undo the padding
-    if np.allclose(uv[0], uv[-1]):
-        uv = uv[:-1]
+    uv = largest_level_line(img) - 1.0  # (x=column, y=row) = (u, v); undo the padding
     pts = camera.pixel_to_world(uv, z)
     x, y = pts[:, 0], pts[:, 1]
     if 0.5 * np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y) < 0:

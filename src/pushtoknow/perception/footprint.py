@@ -5,12 +5,11 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
-import contourpy
 import numpy as np
 from scipy.ndimage import gaussian_filter, map_coordinates
 
 from pushtoknow.common.camera import CameraModel
-from pushtoknow.geometry.affordances import Contour, mask_contour
+from pushtoknow.geometry.affordances import Contour, largest_level_line, mask_contour
 
 FOOTPRINT_VERTICES = 32  # vertices of every footprint polygon (batchable)
 # Gaussian σ (m on the traced plane) the mask is smoothed by before its outline is traced. A
@@ -270,9 +269,7 @@ def fused_contour(
         uv = cam.world_to_pixel(world, top)
         average += map_coordinates(img, [uv[:, 1], uv[:, 0]], order=1, mode="constant")
     average = (average / len(masks)).reshape(len(gy), len(gx))
-    line = max(contourpy.contour_generator(x=gx, y=gy, z=average).lines(0.5), key=len)
-    if np.allclose(line[0], line[-1]):
-        line = line[:-1]
+    line = largest_level_line(average, gx, gy)
     x, y = line[:, 0], line[:, 1]
     if np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y) < 0:
         line = line[::-1]
