@@ -15,50 +15,10 @@ from pushtoknow.identification.prior import (
     prior_moments,
 )
 from pushtoknow.inference import InferenceConfig, infer_simulated, make_estimator
-from pushtoknow.inference.physics_filter import PhysicsFilterEstimator, outline_shape
+from pushtoknow.inference.physics_filter import PhysicsFilterEstimator
 from pushtoknow.models.checkpoint import load_checkpoint
 from pushtoknow.pretrained import resolve_model_path
 from pushtoknow.testbed.object_refs import load_object_spec
-from pushtoknow.testbed.shapes import footprint_from_shape
-
-
-def test_the_traced_outline_becomes_a_polygon_the_testbed_accepts():
-    t = np.linspace(0, 2 * np.pi, 60, endpoint=False)
-    traced = np.column_stack([0.05 * np.cos(t) + 0.003, 0.03 * np.sin(t) - 0.002])  # off-centre
-    shape, offset = outline_shape(traced[::-1])  # clockwise, as a mask tracer may give it
-    np.testing.assert_allclose(offset, [0.003, -0.002], atol=2e-5)  # the replay's frame offset
-    fp = footprint_from_shape(shape)
-    np.testing.assert_allclose(fp.polygon.centroid.coords[0], 0.0, atol=1e-9)
-    assert fp.polygon.exterior.is_ccw
-    assert fp.polygon.area == pytest.approx(np.pi * 0.05 * 0.03, rel=0.01)
-
-
-def test_a_traced_outline_narrower_than_the_testbed_allows_is_stretched_across():
-    """A thin bar traced 26 mm wide (a pixel lost on each side) replays as 30 mm wide, rotated
-    as traced, its length and centroid kept; a wide enough outline is left as it is."""
-    from shapely.geometry import Polygon
-
-    from pushtoknow.common.params import ObjectParams
-    from pushtoknow.testbed.objects import MIN_WIDTH, ObjectSpec, validate_footprint
-
-    c, s = np.cos(0.4), np.sin(0.4)
-    rot = np.array([[c, -s], [s, c]])
-    bar = np.array([[-0.09, -0.013], [0.09, -0.013], [0.09, 0.013], [-0.09, 0.013]]) @ rot.T
-    shape, _ = outline_shape(bar)
-    v = np.asarray(shape["vertices"]) @ rot  # back in the bar's axes
-    assert np.ptp(v[:, 1]) == pytest.approx(1.01 * MIN_WIDTH, rel=1e-9)
-    np.testing.assert_allclose(np.ptp(v[:, 0]), 0.18, rtol=1e-9)
-    np.testing.assert_allclose(v.mean(axis=0), 0.0, atol=1e-12)
-    ObjectSpec(shape, ObjectParams(0.5, 0.5, 0.0, 0.0, 1.0e-3))  # the testbed accepts it
-    # a thin triangle, whose first stretch tilts its narrowest rectangle, and 200 random ones
-    rng = np.random.default_rng(5)
-    thin = [np.array([[0.001, -0.046], [0.01, 0.029], [-0.019, 0.024]])]
-    thin += [rng.normal(0, [0.04, 0.008], (rng.integers(3, 8), 2)) for _ in range(200)]
-    for traced in thin:
-        hull = np.asarray(Polygon(traced).convex_hull.exterior.coords)[:-1]
-        validate_footprint(footprint_from_shape(outline_shape(hull)[0]))
-    wide, _ = outline_shape((bar @ rot) * [1.0, 2.0] @ rot.T)  # 52 mm wide
-    assert footprint_from_shape(wide).polygon.area == pytest.approx(0.18 * 0.052, rel=1e-9)
 
 
 def test_polygon_moments_are_the_uniform_distributions():

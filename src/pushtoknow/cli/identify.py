@@ -29,7 +29,8 @@ from pushtoknow.common.errors import IdentificationError, PushToKnowError
 
 IDENTIFY_SHAPE_HELP = (
     "footprint to identify with: 'dataset' (the one stored with the pushes), 'from-mask' "
-    "(estimated from the first push's S_0 and the camera model), a shape name (rect1, "
+    "(traced on the first push's outline mask, corners sharpened, as the physics filter "
+    "traces the outline it replays), a shape name (rect1, "
     "pentagon, ...), inline JSON, or a JSON/YAML file (a shape or an object spec)"
 )
 

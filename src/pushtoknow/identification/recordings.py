@@ -26,8 +26,6 @@ if TYPE_CHECKING:
     from pushtoknow.datasets.mcap_reader import BagOptions
     from pushtoknow.datasets.recording import RecordingMeta
 
-MASK_SIMPLIFY = 5e-4  # m: tolerance of the polygon simplification of a mask's contour
-
 
 @dataclass(frozen=True)
 class RecordedObject:
@@ -250,30 +248,24 @@ def parse_shape(text: str) -> dict:
 
 
 def footprint_from_mask(obj: RecordedObject) -> tuple[dict, tuple[float, float]]:
-    """The footprint seen in the first push's S_0 (top face, camera of the stored settings),
-    in the object frame of the recorded pose track. Returns (shape dict, frame offset: the
-    mask polygon's centroid in that frame, m)."""
-    from shapely.geometry import Polygon
-
-    from pushtoknow.geometry.affordances import mask_contour
-    from pushtoknow.perception.footprint import OUTLINE_SMOOTHING
+    """The footprint seen in the first push's outline mask (else S_0; camera of the stored
+    settings, the object's top at its stored height), traced as the physics filter traces the
+    outline it replays (`perception.footprint.replay_shape`: corners sharpened), in the object
+    frame of the recorded pose track. Returns (shape dict, frame offset: the polygon's centroid
+    in that frame, m)."""
+    from pushtoknow.perception.footprint import replay_shape
 
     rec = obj.records[0]
-    if rec.s0 is None or not np.asarray(rec.s0).any():
+    mask = rec.s0 if rec.outline_mask is None else rec.outline_mask
+    if mask is None or not np.asarray(mask).any():
         raise IdentificationError(f"{obj.name}: no object mask S_0 to estimate the footprint from")
     camera = obj.sim_config.camera.model()
-    mask = rec.s0 if rec.outline_mask is None else rec.outline_mask
-    contour = mask_contour(np.asarray(mask, dtype=bool), camera, obj.height, OUTLINE_SMOOTHING)
-    x, y, th = map(float, rec.pose[0])
-    c, s = np.cos(-th), np.sin(-th)
-    d = contour.points - np.array([x, y])
-    local = np.column_stack([c * d[:, 0] - s * d[:, 1], s * d[:, 0] + c * d[:, 1]])
-    poly = Polygon(local).buffer(0).simplify(MASK_SIMPLIFY)
-    if poly.geom_type != "Polygon" or poly.area <= 0:
-        raise IdentificationError(f"{obj.name}: the mask S_0 gives no simple footprint")
-    centroid = poly.centroid
-    verts = np.asarray(poly.exterior.coords)[:-1] - np.array([centroid.x, centroid.y])
-    return {"type": "polygon", "vertices": verts.tolist()}, (centroid.x, centroid.y)
+    try:
+        return replay_shape(np.asarray(mask, dtype=bool), camera, obj.height, rec.pose[0])
+    except (ValueError, ObjectSpecError) as e:
+        raise IdentificationError(
+            f"{obj.name}: the mask S_0 gives no simple footprint ({e})"
+        ) from None
 
 
 def replay_scene(

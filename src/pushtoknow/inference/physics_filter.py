@@ -31,7 +31,6 @@ from collections.abc import Sequence
 
 import numpy as np
 import torch
-from shapely.geometry import Polygon
 
 from pushtoknow.active.selection import ScoreName
 from pushtoknow.common.angles import wrap_angle
@@ -68,6 +67,7 @@ from pushtoknow.perception.footprint import (
     fused_outline,
     object_top,
     outline_contour,
+    outline_shape,
     replay_contour,
     replay_outline,
     to_object_frame,
@@ -75,47 +75,12 @@ from pushtoknow.perception.footprint import (
 from pushtoknow.perception.registration import outline_points, register
 from pushtoknow.perception.visnet import start_pose, visnet_poses
 from pushtoknow.testbed.executor import View
-from pushtoknow.testbed.objects import COM_MARGIN, MIN_HEIGHT, MIN_WIDTH, narrowest_side
+from pushtoknow.testbed.objects import COM_MARGIN, MIN_HEIGHT
 from pushtoknow.testbed.push import Push
-from pushtoknow.testbed.shapes import polygon_footprint
 from pushtoknow.testbed.sim import PushRecord
 from pushtoknow.testbed.sim_config import SimConfig
 
 log = logging.getLogger(__name__)
-OUTLINE_SIMPLIFY = 2e-4  # m: the outline's vertices within this of a line are dropped
-
-
-def outline_shape(footprint: np.ndarray) -> tuple[dict, tuple[float, float]]:
-    """A polygon spec (`testbed.objects`) of a traced footprint (V, 2), object frame:
-    simplified and centred on its centroid, as the testbed requires; and that centroid's
-    position in the object frame (m), the replay's `frame_offset`."""
-    poly = Polygon(np.asarray(footprint, dtype=np.float64)).buffer(0).simplify(OUTLINE_SIMPLIFY)
-    if poly.geom_type != "Polygon":
-        poly = max(poly.geoms, key=lambda g: g.area)
-    c = poly.centroid
-    verts = np.asarray(poly.exterior.coords)[:-1] - np.array([c.x, c.y])
-    if Polygon(verts).exterior.is_ccw is False:
-        verts = verts[::-1]
-    return {"type": "polygon", "vertices": at_least_min_width(verts).tolist()}, (c.x, c.y)
-
-
-WIDEN_ROUNDS = 8  # stretches `at_least_min_width` tries
-
-
-def at_least_min_width(verts: np.ndarray) -> np.ndarray:
-    """Polygon vertices (V, 2) about their centroid, stretched across their narrowest direction
-    (the minimum rotated rectangle's short side) to 1% above `testbed.objects.MIN_WIDTH` where
-    narrower, again until the testbed's width check passes (a stretch can tilt the rectangle):
-    a traced outline loses up to a pixel on each side, and the testbed simulates no object
-    narrower than the camera can see."""
-    for _ in range(WIDEN_ROUNDS):  # a stretch can tilt the rectangle: stretch again
-        short = narrowest_side(polygon_footprint(verts))  # as `validate_footprint` measures
-        width = float(np.linalg.norm(short))
-        if width >= MIN_WIDTH:
-            return verts
-        axis = short / width
-        verts = verts + np.outer((verts @ axis) * (1.01 * MIN_WIDTH / width - 1.0), axis)
-    return verts
 
 
 class PhysicsFilterEstimator(Estimator):

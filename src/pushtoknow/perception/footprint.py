@@ -7,9 +7,12 @@ from collections.abc import Sequence
 
 import numpy as np
 from scipy.ndimage import gaussian_filter, map_coordinates
+from shapely.geometry import Polygon
 
 from pushtoknow.common.camera import CameraModel
 from pushtoknow.geometry.affordances import Contour, largest_level_line, mask_contour
+from pushtoknow.testbed.objects import MIN_WIDTH, narrowest_side
+from pushtoknow.testbed.shapes import polygon_footprint
 
 FOOTPRINT_VERTICES = 32  # vertices of every footprint polygon (batchable)
 # Gaussian σ (m on the traced plane) the mask is smoothed by before its outline is traced. A
@@ -228,6 +231,54 @@ def outline_contour(mask: np.ndarray, camera: CameraModel, top: float) -> Contou
     """The contour (world, m) traced as `replay_contour` traces it on an object mask (H, W) or
     (kH, kW), on the plane at height `top` (m, the object's top)."""
     return mask_contour(mask, camera, top, smoothing=REPLAY_SMOOTHING)
+
+
+def replay_shape(
+    mask: np.ndarray, camera: CameraModel, top: float, pose0
+) -> tuple[dict, tuple[float, float]]:
+    """The polygon spec a simulator replays the pushes of an object with, traced on its mask
+    (H, W) or (kH, kW) seen at pose0 (x, y, θ) with its top at `top` (m) as the physics filter
+    traces it (`outline_contour`, `sharpen_corners`, `outline_shape`): about its centroid, and
+    that centroid's position in the object frame of pose0 (origin at pose0's x, y; m)."""
+    contour = outline_contour(mask, camera, top)
+    local = to_object_frame(sharpen_corners(contour.points), np.asarray(pose0)[:2], pose0)
+    return outline_shape(local)
+
+
+OUTLINE_SIMPLIFY = 2e-4  # m: the outline's vertices within this of a line are dropped
+
+
+def outline_shape(footprint: np.ndarray) -> tuple[dict, tuple[float, float]]:
+    """A polygon spec (`testbed.objects`) of a traced footprint (V, 2), object frame:
+    simplified and centred on its centroid, as the testbed requires; and that centroid's
+    position in the object frame (m), the replay's `frame_offset`."""
+    poly = Polygon(np.asarray(footprint, dtype=np.float64)).buffer(0).simplify(OUTLINE_SIMPLIFY)
+    if poly.geom_type != "Polygon":
+        poly = max(poly.geoms, key=lambda g: g.area)
+    c = poly.centroid
+    verts = np.asarray(poly.exterior.coords)[:-1] - np.array([c.x, c.y])
+    if Polygon(verts).exterior.is_ccw is False:
+        verts = verts[::-1]
+    return {"type": "polygon", "vertices": at_least_min_width(verts).tolist()}, (c.x, c.y)
+
+
+WIDEN_ROUNDS = 8  # stretches `at_least_min_width` tries
+
+
+def at_least_min_width(verts: np.ndarray) -> np.ndarray:
+    """Polygon vertices (V, 2) about their centroid, stretched across their narrowest direction
+    (the minimum rotated rectangle's short side) to 1% above `testbed.objects.MIN_WIDTH` where
+    narrower, again until the testbed's width check passes (a stretch can tilt the rectangle):
+    a traced outline loses up to a pixel on each side, and the testbed simulates no object
+    narrower than the camera can see."""
+    for _ in range(WIDEN_ROUNDS):  # a stretch can tilt the rectangle: stretch again
+        short = narrowest_side(polygon_footprint(verts))  # as `validate_footprint` measures
+        width = float(np.linalg.norm(short))
+        if width >= MIN_WIDTH:
+            return verts
+        axis = short / width
+        verts = verts + np.outer((verts @ axis) * (1.01 * MIN_WIDTH / width - 1.0), axis)
+    return verts
 
 
 # The outline refined from several views (`fused_outline`): each outline mask is smoothed this
