@@ -208,8 +208,6 @@ def test_the_traced_outline_becomes_a_polygon_the_testbed_accepts():
 def test_a_traced_outline_narrower_than_the_testbed_allows_is_stretched_across():
     """A thin bar traced 26 mm wide (a pixel lost on each side) replays as 30 mm wide, rotated
     as traced, its length and centroid kept; a wide enough outline is left as it is."""
-    from shapely.geometry import Polygon
-
     from pushtoknow.common.params import ObjectParams
     from pushtoknow.testbed.objects import MIN_WIDTH, ObjectSpec, validate_footprint
 
